@@ -1,0 +1,113 @@
+"""The scan and log types every reader returns and every later stage reads."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vgm_studio.core import se2
+
+PoseSource = Literal["odometry", "reference"]
+
+# Readings this short are dropouts, not obstacles.
+MIN_VALID_RANGE = 0.01
+
+
+@dataclass(frozen=True)
+class Scan:
+    """One 2D laser scan with the sensor poses a log gives for it.
+
+    Poses are of the laser in the world frame as (x, y, θ). Ranges at or beyond
+    ``max_range`` (the sensor's "no return" value) and below ``MIN_VALID_RANGE`` are not points.
+    """
+
+    index: int
+    timestamp: float
+    ranges: NDArray[np.float32]
+    angle_min: float
+    angle_increment: float
+    max_range: float
+    odometry: NDArray[np.float64] | None = None
+    reference: NDArray[np.float64] | None = None
+    line: int = 0
+
+    @property
+    def num_beams(self) -> int:
+        return int(self.ranges.shape[0])
+
+    @property
+    def fov(self) -> float:
+        """Angle from the first beam to the last, in radians."""
+        return self.angle_increment * max(self.num_beams - 1, 0)
+
+    def angles(self) -> NDArray[np.float64]:
+        return self.angle_min + self.angle_increment * np.arange(self.num_beams, dtype=np.float64)
+
+    def points(self) -> NDArray[np.float64]:
+        """Returns the (N, 2) valid end points in the sensor frame."""
+        r = self.ranges.astype(np.float64)
+        a = self.angles()
+        keep = (r >= MIN_VALID_RANGE) & (r < self.max_range) & np.isfinite(r)
+        r, a = r[keep], a[keep]
+        return np.stack([r * np.cos(a), r * np.sin(a)], axis=1).astype(np.float64)
+
+
+@dataclass
+class ScanLog:
+    """All scans of one log plus what the reader learnt about it."""
+
+    path: Path
+    format: str
+    scans: list[Scan]
+    content_hash: str
+    pose_source: PoseSource | None = None
+    skipped_lines: int = 0
+    ignored_messages: dict[str, int] = field(default_factory=dict)
+    message_counts: dict[str, int] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.scans)
+
+    @property
+    def timestamps(self) -> NDArray[np.float64]:
+        return np.array([s.timestamp for s in self.scans], dtype=np.float64)
+
+    @property
+    def has_odometry(self) -> bool:
+        return bool(self.scans) and all(s.odometry is not None for s in self.scans)
+
+    @property
+    def has_reference(self) -> bool:
+        return bool(self.scans) and all(s.reference is not None for s in self.scans)
+
+    def odometry_poses(self) -> NDArray[np.float64] | None:
+        """(N, 3) odometry poses, or None when any scan lacks one."""
+        if not self.has_odometry:
+            return None
+        return np.array([s.odometry for s in self.scans], dtype=np.float64)
+
+    def reference_poses(self) -> NDArray[np.float64] | None:
+        """(N, 3) reference poses, or None when any scan lacks one."""
+        if not self.has_reference:
+            return None
+        return np.array([s.reference for s in self.scans], dtype=np.float64)
+
+    def travelled_distance(self) -> float:
+        """Path length of the reference trajectory, else of odometry, in metres."""
+        poses = self.reference_poses()
+        if poses is None:
+            poses = self.odometry_poses()
+        if poses is None or len(poses) < 2:
+            return 0.0
+        return float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T)))
+
+    def relative_reference(self, a: int, b: int) -> NDArray[np.float64] | None:
+        """Reference pose of scan b in the frame of scan a, when both are known."""
+        ra, rb = self.scans[a].reference, self.scans[b].reference
+        if ra is None or rb is None:
+            return None
+        return se2.between(ra, rb)

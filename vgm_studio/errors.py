@@ -1,0 +1,24 @@
+"""Errors that reach the user as one line: ``file:line: what is wrong``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class InputError(Exception):
+    """Bad input a user can fix: a missing file, a malformed line, an unknown option.
+
+    The command line prints ``str(error)`` and exits non-zero, never a traceback.
+    """
+
+    def __init__(self, path: str | Path | None, message: str, line: int | None = None) -> None:
+        self.path = None if path is None else str(path)
+        self.line = line
+        self.message = message
+        super().__init__(str(self))
+
+    def __str__(self) -> str:
+        where = self.path or ""
+        if self.line is not None:
+            where = f"{where}:{self.line}"
+        return f"{where}: {self.message}" if where else self.message
