@@ -1,0 +1,107 @@
+"""The VGM against a plain per-cell loop written from the issue's definition."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from vgm_studio.core import se2
+from vgm_studio.datasets import open_log
+from vgm_studio.vgm import grid_map, pair_map
+
+
+def plain_grid_map(points, size=400, resolution=0.05, sigma=0.02):
+    """The definition, one cell at a time, with no vectorisation."""
+    half = size * resolution / 2
+    cells: dict[tuple[int, int], list[tuple[float, float]]] = {}
+    for x, y in points:
+        j = math.floor((x + half) / resolution)
+        i = math.floor((y + half) / resolution)
+        if 0 <= i < size and 0 <= j < size:
+            cells.setdefault((i, j), []).append((x, y))
+    out = np.zeros((size, size), dtype=np.float64)
+    if not cells:
+        return out
+    n_max = max(len(v) for v in cells.values())
+    for (i, j), pts in cells.items():
+        p = np.array(pts)
+        mu = p.mean(axis=0)
+        cov = (p - mu).T @ (p - mu) / len(p) + sigma**2 * np.eye(2)
+        c = np.array([-half + (j + 0.5) * resolution, -half + (i + 0.5) * resolution])
+        d = c - mu
+        out[i, j] = math.exp(-0.5 * d @ np.linalg.inv(cov) @ d) * len(p) / n_max
+    return out
+
+
+def test_random_points_match_plain_loop():
+    rng = np.random.default_rng(1)
+    # Clustered points so that many cells hold several points, plus some outside the grid.
+    centres = rng.uniform(-9, 9, size=(40, 2))
+    pts = np.concatenate([c + rng.normal(0, 0.03, size=(12, 2)) for c in centres])
+    pts = np.concatenate([pts, rng.uniform(-15, 15, size=(50, 2))])
+    got = grid_map(pts)
+    want = plain_grid_map(pts)
+    assert got.dtype == np.float32 and got.shape == (400, 400)
+    np.testing.assert_allclose(got, want, atol=1e-5)
+    assert (got > 0).sum() > 100
+    assert got.max() <= 1.0
+
+
+@pytest.mark.parametrize(("size", "resolution", "sigma"), [(64, 0.1, 0.05), (128, 0.02, 0.01)])
+def test_other_parameters_match_plain_loop(size, resolution, sigma):
+    rng = np.random.default_rng(size)
+    pts = rng.normal(0, size * resolution / 5, size=(500, 2))
+    np.testing.assert_allclose(
+        grid_map(pts, size=size, resolution=resolution, sigma=sigma),
+        plain_grid_map(pts, size, resolution, sigma),
+        atol=1e-5,
+    )
+
+
+def test_real_scans_match_plain_loop(datasets):
+    log = open_log(datasets / "intel" / "intel.gfs.log")
+    a, b = log.scans[100], log.scans[101]
+    estimate = se2.between(a.reference, b.reference)
+    got = pair_map(a.points(), b.points(), estimate)
+    assert got.shape == (2, 400, 400) and got.dtype == np.float32
+    np.testing.assert_allclose(got[0], plain_grid_map(a.points()), atol=1e-5)
+    moved = se2.transform_points(estimate, b.points())
+    np.testing.assert_allclose(got[1], plain_grid_map(moved), atol=1e-5)
+
+
+def test_cell_layout_rows_run_along_y():
+    # One point in the cell at x ∈ [0.05, 0.10), y ∈ [−0.10, −0.05) → j = 201, i = 198.
+    g = grid_map(np.array([[0.07, -0.08]]))
+    (i, j) = np.argwhere(g > 0)[0]
+    assert (i, j) == (198, 201)
+
+
+def test_point_at_cell_centre_scores_one_and_offsets_score_less():
+    centre = np.array([[0.025, 0.025]])
+    assert grid_map(centre)[200, 200] == pytest.approx(1.0)
+    off = grid_map(np.array([[0.045, 0.025]]))[200, 200]
+    assert off == pytest.approx(math.exp(-0.5 * 0.02**2 / 0.02**2), rel=1e-6)
+
+
+def test_hit_ratio_weights_by_count():
+    pts = np.array([[0.025, 0.025]] * 4 + [[1.025, 1.025]])
+    g = grid_map(pts)
+    assert g[200, 200] == pytest.approx(1.0)
+    assert g[220, 220] == pytest.approx(0.25)
+
+
+def test_empty_and_outside_points_give_zero_grid():
+    assert not grid_map(np.zeros((0, 2))).any()
+    assert not grid_map(np.array([[50.0, 0.0], [0.0, -10.0001]])).any()
+
+
+def test_pair_map_moves_current_scan_by_estimate():
+    prev = np.array([[1.025, 0.025]])
+    cur = np.array([[0.025, 0.025]])
+    # Translating the current scan by +1 m in x puts its point on the previous one.
+    vgm = pair_map(prev, cur, [1.0, 0.0, 0.0])
+    np.testing.assert_allclose(vgm[0], vgm[1], atol=1e-6)
+    rotated = pair_map(prev, np.array([[0.025, -1.025]]), [0.0, 0.0, math.pi / 2])
+    np.testing.assert_allclose(rotated[1], vgm[0], atol=1e-5)
