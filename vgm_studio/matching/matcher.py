@@ -1,0 +1,114 @@
+"""The scan matcher: kiss-icp from a guess, then 2D refinement, with quality figures."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from kiss_icp.mapping import VoxelHashMap
+from numpy.typing import NDArray
+
+from vgm_studio.datasets.scans import Scan
+from vgm_studio.matching.config import MatchConfig
+from vgm_studio.matching.refinement import Target, refine
+from vgm_studio.matching.registration import KissRegistration
+
+
+@dataclass(frozen=True)
+class MatchResult:
+    """A match of scan b against scan a.
+
+    Attributes:
+        estimate: (x, y, θ) of scan b in the frame of scan a.
+        iterations: Refinement iterations (0 when refinement is off or impossible).
+        converged: The refinement converged.
+        inlier_ratio: Share of scan b's points that agree with scan a after the match.
+        residual: RMS point-to-line residual of the inliers, metres.
+        covariance: 3×3 covariance of the estimate, None where not available.
+        kiss_estimate: kiss-icp's own estimate before refinement.
+    """
+
+    estimate: NDArray[np.float64]
+    iterations: int
+    converged: bool
+    inlier_ratio: float
+    residual: float
+    covariance: NDArray[np.float64] | None
+    kiss_estimate: NDArray[np.float64]
+
+    def figures(self) -> dict[str, Any]:
+        """The quality figures as JSON-ready values."""
+        d = asdict(self)
+        d.pop("estimate")
+        for key in ("covariance", "kiss_estimate"):
+            if d[key] is not None:
+                d[key] = np.asarray(d[key]).tolist()
+        d["residual"] = None if not np.isfinite(self.residual) else self.residual
+        return d
+
+
+@dataclass(frozen=True)
+class _Prepared:
+    points: NDArray[np.float64]
+    voxel_map: VoxelHashMap | None
+    target: Target | None
+
+
+class ScanMatcher:
+    """Matches pairs of scans; each scan's points, voxel map and normals are built once."""
+
+    def __init__(self, config: MatchConfig | None = None) -> None:
+        self.config = config or MatchConfig()
+        self._kiss = KissRegistration(self.config)
+        self._cache: dict[int, _Prepared] = {}
+
+    def points(self, scan: Scan) -> NDArray[np.float64]:
+        return self._prepare(scan).points
+
+    def _prepare(self, scan: Scan) -> _Prepared:
+        hit = self._cache.get(id(scan))
+        if hit is None:
+            pts = scan.points()
+            pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= self.config.max_range]
+            ok = len(pts) >= 3
+            hit = _Prepared(
+                points=pts,
+                voxel_map=self._kiss.target_map(pts) if ok else None,
+                target=Target.build(pts, self.config.normal_neighbors) if ok else None,
+            )
+            self._cache[id(scan)] = hit
+        return hit
+
+    def forget(self, scan: Scan) -> None:
+        """Drops a scan's cached structures (for long logs streamed through)."""
+        self._cache.pop(id(scan), None)
+
+    def match(self, a: Scan, b: Scan, guess: NDArray[np.float64]) -> MatchResult:
+        """Estimates the pose of scan b in the frame of scan a, starting from ``guess``."""
+        pa, pb = self._prepare(a), self._prepare(b)
+        guess = np.asarray(guess, dtype=np.float64)
+        if pa.voxel_map is None or pa.target is None or len(pb.points) < 3:
+            return MatchResult(guess, 0, False, 0.0, float("inf"), None, guess)
+        kiss = self._kiss.align(pb.points, pa.voxel_map, guess)
+        if not self.config.refine:
+            r = refine(
+                pa.target,
+                pb.points,
+                kiss,
+                max_iterations=0,
+                max_distance=self.config.refine_distance,
+                inlier_distance=self.config.inlier_distance,
+            )
+            return MatchResult(kiss, 0, True, r.inlier_ratio, r.residual, None, kiss)
+        r = refine(
+            pa.target,
+            pb.points,
+            kiss,
+            max_iterations=self.config.refine_iterations,
+            max_distance=self.config.refine_distance,
+            inlier_distance=self.config.inlier_distance,
+        )
+        return MatchResult(
+            r.estimate, r.iterations, r.converged, r.inlier_ratio, r.residual, r.covariance, kiss
+        )

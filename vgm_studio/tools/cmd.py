@@ -1,0 +1,327 @@
+"""The ``vgm-studio`` command line: thin wrappers over the package's stages."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from collections import Counter
+from dataclasses import asdict
+from enum import Enum
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from vgm_studio.datasets import ReadOptions, ScanLog, open_log
+from vgm_studio.errors import InputError
+
+app = typer.Typer(
+    name="vgm-studio",
+    help="Label, validate and debug 2D LiDAR scan-matching edges with Validation Grid Maps.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+)
+
+ASSETS = Path(__file__).resolve().parents[2]
+DEMO_LOG = ASSETS / "datasets" / "demo" / "demo-seed7.log"
+
+
+class Poses(str, Enum):
+    auto = "auto"
+    odometry = "odometry"
+    reference = "reference"
+
+
+class Laser(str, Enum):
+    front = "front"
+    rear = "rear"
+
+
+LogArg = Annotated[Path, typer.Argument(help="CARMEN log, ROS 1 .bag or ROS 2 bag folder.")]
+PosesOpt = Annotated[
+    Poses,
+    typer.Option(
+        help="What the scans' pose fields hold (auto: GMapping output → reference, else odometry)."
+    ),
+]
+FovOpt = Annotated[float, typer.Option("--fov", help="FLASER field of view in degrees.")]
+MaxRangeOpt = Annotated[
+    float | None,
+    typer.Option(
+        help="Readings at or beyond this (m) are no-returns "
+        "[default: the message's, or 95% of the log's largest reading]."
+    ),
+]
+LaserOpt = Annotated[Laser, typer.Option(help="front: FLASER/ROBOTLASER1; rear: RLASER.")]
+SkipOpt = Annotated[bool, typer.Option(help="Skip malformed lines and report how many.")]
+ScanTopicOpt = Annotated[str | None, typer.Option(help="ROS bags: LaserScan topic.")]
+OdomTopicOpt = Annotated[str | None, typer.Option(help="ROS bags: Odometry topic.")]
+
+
+def _read_options(
+    poses: Poses,
+    fov: float,
+    max_range: float | None,
+    laser: Laser,
+    skip_bad_lines: bool,
+    scan_topic: str | None = None,
+    odom_topic: str | None = None,
+) -> ReadOptions:
+    return ReadOptions(
+        poses=poses.value,
+        fov_deg=fov,
+        max_range=max_range,
+        laser=laser.value,
+        skip_bad_lines=skip_bad_lines,
+        scan_topic=scan_topic,
+        odom_topic=odom_topic,
+    )
+
+
+def _report_skipped(log: ScanLog) -> None:
+    if log.skipped_lines:
+        typer.echo(f"{log.path}: skipped {log.skipped_lines} malformed line(s)", err=True)
+
+
+@app.command()
+def info(
+    log: LogArg,
+    poses: PosesOpt = Poses.auto,
+    fov: FovOpt = 180.0,
+    max_range: MaxRangeOpt = None,
+    laser: LaserOpt = Laser.front,
+    skip_bad_lines: SkipOpt = False,
+    scan_topic: ScanTopicOpt = None,
+    odom_topic: OdomTopicOpt = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+) -> None:
+    """Print what a log holds: scans, beams, field of view, duration, poses, distance."""
+    from vgm_studio.datasets.relations import looks_like_relations, read_relations
+    from vgm_studio.tools.info import format_summary, summarize
+
+    if log.is_file() and looks_like_relations(log):
+        rel = read_relations(log)
+        stamps = {r.t_a for r in rel} | {r.t_b for r in rel}
+        typer.echo(
+            f"{log}: Freiburg relations file, {len(rel)} relations "
+            f"between {len(stamps)} scan timestamps"
+        )
+        return
+    scan_log = open_log(
+        log, _read_options(poses, fov, max_range, laser, skip_bad_lines, scan_topic, odom_topic)
+    )
+    summary = summarize(scan_log)
+    typer.echo(json.dumps(summary, indent=2) if as_json else format_summary(summary))
+    _report_skipped(scan_log)
+
+
+@app.command()
+def simulate(
+    out: Annotated[Path, typer.Option(help="Folder to write the log into.")],
+    seed: Annotated[int, typer.Option(help="Random seed; same seed, same bytes.")] = 0,
+    preset: Annotated[
+        str,
+        typer.Option(
+            help="World: corridor, l-junction, t-junction, loop, repetitive, office, demo."
+        ),
+    ] = "office",
+    beams: Annotated[int, typer.Option(help="Beams per scan.")] = 361,
+    fov: Annotated[float, typer.Option("--fov", help="Field of view, degrees.")] = 180.0,
+    range_noise: Annotated[float, typer.Option(help="Range noise σ, metres.")] = 0.01,
+    max_range: Annotated[float, typer.Option(help="Sensor maximum range, metres.")] = 30.0,
+    people: Annotated[int, typer.Option(help="Moving people in the world.")] = 0,
+) -> None:
+    """Write a simulated CARMEN log (TRUEPOS ground truth, noisy odometry) by ray casting."""
+    from vgm_studio.simulation.simulate import SimConfig
+    from vgm_studio.simulation.simulate import simulate as run
+
+    config = SimConfig(
+        preset=preset,
+        seed=seed,
+        num_beams=beams,
+        fov_deg=fov,
+        range_noise=range_noise,
+        max_range=max_range,
+        people=people,
+    )
+    path = run(config, out)
+    typer.echo(f"wrote {path}")
+
+
+@app.command()
+def candidates(
+    log: LogArg,
+    out: Annotated[Path, typer.Option(help="Edges JSONL file to write.")],
+    reference: Annotated[
+        Path | None,
+        typer.Option(
+            help="Reference: a corrected log, a log with TRUEPOS, or a "
+            "Freiburg relations file [default: the log's own poses]."
+        ),
+    ] = None,
+    seed: Annotated[int, typer.Option(help="Seed for loop sampling and guess noise.")] = 0,
+    max_loops: Annotated[int, typer.Option("--max", help="Loop candidates at most.")] = 2000,
+    min_gap: Annotated[int, typer.Option(help="Loop pairs at least this many scans apart.")] = 50,
+    max_distance: Annotated[float, typer.Option(help="Loop pairs within this many metres.")] = 3.0,
+    max_angle: Annotated[float, typer.Option(help="Loop pairs within this many degrees.")] = 45.0,
+    noise_xy: Annotated[float, typer.Option(help="Guess noise σ in x and y, metres.")] = 0.3,
+    noise_theta: Annotated[float, typer.Option(help="Guess noise σ in θ, degrees.")] = 5.0,
+    keyframe_distance: Annotated[
+        float, typer.Option(help="Keyframe every this many metres (0: every scan).")
+    ] = 0.0,
+    keyframe_angle: Annotated[float, typer.Option(help="…or this many degrees.")] = 0.0,
+    sequential: Annotated[bool, typer.Option(help="Make sequential edges.")] = True,
+    loops: Annotated[bool, typer.Option(help="Make loop edges.")] = True,
+    success_xy: Annotated[float, typer.Option(help="Success: |e_xy| ≤ this (m)…")] = 0.10,
+    success_theta: Annotated[float, typer.Option(help="…and |e_θ| ≤ this (deg).")] = 2.0,
+    failure_xy: Annotated[float, typer.Option(help="Failure: |e_xy| ≥ this (m)…")] = 0.30,
+    failure_theta: Annotated[float, typer.Option(help="…or |e_θ| ≥ this (deg).")] = 5.0,
+    time_tolerance: Annotated[
+        float, typer.Option(help="Reference timestamps match within this many seconds.")
+    ] = 0.05,
+    poses: PosesOpt = Poses.auto,
+    fov: FovOpt = 180.0,
+    max_range: MaxRangeOpt = None,
+    laser: LaserOpt = Laser.front,
+    skip_bad_lines: SkipOpt = False,
+    scan_topic: ScanTopicOpt = None,
+    odom_topic: OdomTopicOpt = None,
+) -> None:
+    """Match candidate edges of a log and label them against a reference; write JSONL."""
+    from vgm_studio.datasets.reference import with_reference
+    from vgm_studio.datasets.relations import looks_like_relations, match_relations, read_relations
+    from vgm_studio.matching.candidates import CandidateConfig, make_candidates
+    from vgm_studio.matching.edges import write_edges
+    from vgm_studio.matching.labels import LabelThresholds
+    from vgm_studio.matching.matcher import ScanMatcher
+
+    options = _read_options(poses, fov, max_range, laser, skip_bad_lines, scan_topic, odom_topic)
+    scan_log = open_log(log, options)
+    _report_skipped(scan_log)
+    params: dict[str, Any] = {"read": asdict(options), "reference_source": "log"}
+    matched = None
+    if reference is not None:
+        params["reference_source"] = str(reference)
+        if looks_like_relations(reference):
+            matched, missed = match_relations(
+                read_relations(reference), scan_log.timestamps, tolerance=min(time_tolerance, 1e-3)
+            )
+            if not matched:
+                raise InputError(reference, f"no relation matches scans of {log} by timestamp")
+            if missed:
+                typer.echo(f"{reference}: {missed} relation(s) match no scan pair", err=True)
+        else:
+            scan_log = with_reference(scan_log, open_log(reference), time_tolerance)
+    config = CandidateConfig(
+        sequential=sequential,
+        loops=loops,
+        keyframe_distance=keyframe_distance,
+        keyframe_angle_deg=keyframe_angle,
+        min_gap=min_gap,
+        max_distance=max_distance,
+        max_angle_deg=max_angle,
+        max_loops=max_loops,
+        seed=seed,
+        noise_xy=noise_xy,
+        noise_theta_deg=noise_theta,
+    )
+    thresholds = LabelThresholds(success_xy, success_theta, failure_xy, failure_theta)
+    start = time.perf_counter()
+    edges = make_candidates(scan_log, ScanMatcher(), config, thresholds, matched, params)
+    seconds = time.perf_counter() - start
+    write_edges(out, edges)
+    _print_edge_summary(edges, seconds, out)
+
+
+def _print_edge_summary(edges: list[Any], seconds: float, out: Path) -> None:
+    counts = Counter((e.kind, e.label or "unlabelled") for e in edges)
+    typer.echo(
+        f"wrote {len(edges)} edges to {out} in {seconds:.1f} s "
+        f"({len(edges) / max(seconds, 1e-9):.0f} edges/s)"
+    )
+    labels = ("success", "failure", "ambiguous", "unlabelled")
+    typer.echo(f"{'kind':<12}" + "".join(f"{lab:>12}" for lab in labels))
+    for kind in ("sequential", "loop"):
+        if any(k == kind for k, _ in counts):
+            typer.echo(f"{kind:<12}" + "".join(f"{counts[(kind, lab)]:>12}" for lab in labels))
+
+
+@app.command()
+def vgm(
+    edges_file: Annotated[Path, typer.Argument(metavar="EDGES.jsonl", help="Edges file.")],
+    edge: Annotated[str, typer.Option(help="edge_id (or a unique prefix) to draw.")],
+    png: Annotated[Path, typer.Option(help="Picture to write.")],
+    guess: Annotated[
+        bool,
+        typer.Option(help="Place the current scan by the initial guess instead of the estimate."),
+    ] = False,
+    size: Annotated[int, typer.Option(help="VGM cells per side.")] = 400,
+    resolution: Annotated[float, typer.Option(help="VGM cell edge, metres.")] = 0.05,
+    sigma: Annotated[float, typer.Option(help="VGM covariance regulariser, metres.")] = 0.02,
+) -> None:
+    """Draw one edge: both scans in two colours over the two VGM channels."""
+    from vgm_studio.matching.edges import read_edges
+    from vgm_studio.vgm.picture import edge_picture
+
+    edges = read_edges(edges_file)
+    hits = [e for e in edges if e.edge_id.startswith(edge)]
+    if len(hits) != 1:
+        what = "no edge" if not hits else f"{len(hits)} edges"
+        raise InputError(edges_file, f"{what} with id {edge!r}")
+    edge_picture(
+        hits[0],
+        png,
+        use_guess=guess,
+        size=size,
+        resolution=resolution,
+        sigma=sigma,
+        search_dirs=(edges_file.parent,),
+    )
+    typer.echo(f"wrote {png}")
+
+
+@app.command()
+def demo(
+    out: Annotated[Path, typer.Option(help="Folder for the demo's outputs.")] = Path("vgm-demo"),
+) -> None:
+    """Run the pipeline on the bundled demo log: candidates, labels and VGM pictures."""
+    from vgm_studio.tools.demo import run_demo
+
+    run_demo(DEMO_LOG, out)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point: runs the CLI and turns every expected error into one line and an exit code."""
+    command = typer.main.get_command(app)
+    try:
+        command.main(args=argv, prog_name="vgm-studio", standalone_mode=False)
+    except InputError as exc:
+        typer.echo(f"vgm-studio: error: {exc}", err=True)
+        sys.exit(1)
+    except (typer.Abort, KeyboardInterrupt):
+        typer.echo("vgm-studio: interrupted", err=True)
+        sys.exit(130)
+    except typer.TyperException as exc:
+        _usage_error(exc)
+    except BrokenPipeError:
+        sys.exit(0)
+
+
+def _usage_error(exc: Exception) -> None:
+    """A usage error (unknown option or command, bad value) as one line, exit code 2."""
+    ctx = getattr(exc, "ctx", None)
+    if type(exc).__name__ == "NoArgsIsHelpError" and ctx is not None:
+        typer.echo(ctx.get_help(), err=True)
+        sys.exit(2)
+    name = f" {ctx.info_name}" if ctx is not None and ctx.info_name != "vgm-studio" else ""
+    format_message = getattr(exc, "format_message", None)
+    message = format_message() if callable(format_message) else str(exc)
+    typer.echo(f"vgm-studio{name}: error: {message}", err=True)
+    sys.exit(int(getattr(exc, "exit_code", 2)))
+
+
+if __name__ == "__main__":
+    main()
