@@ -1,0 +1,405 @@
+"""ROS bags: ``sensor_msgs/LaserScan`` scans with ``nav_msgs/Odometry`` poses.
+
+Reads, with the ``rosbags`` library and without a ROS installation:
+
+* ROS 1 bags: one ``.bag`` file (format ``rosbag1``);
+* ROS 2 bags: a folder holding ``metadata.yaml`` and sqlite3 (``.db3``) or mcap storage, or one
+  such storage file on its own (format ``rosbag2``).
+
+Topics: the scans come from ``ReadOptions.scan_topic``, or from the bag's only LaserScan topic.
+Odometry is optional and comes from ``ReadOptions.odom_topic``, or from the bag's only Odometry
+topic when it has one. Other topics are not read; their message counts go to
+``ScanLog.ignored_messages``.
+
+Times: a message's time is its header stamp, or the time the bag recorded it when the stamp is
+zero (drivers that never fill it in).
+
+Poses: a scan's odometry is the Odometry pose ``(x, y, yaw)`` interpolated at the scan's time,
+linearly in x, y and the unwrapped yaw. A scan before the first or after the last Odometry
+message takes the nearest one if it is at most ``MAX_ODOMETRY_EXTRAPOLATION`` seconds away, and
+no odometry otherwise. The Odometry pose is of the robot base (its ``child_frame_id``); **we
+assume the laser is mounted at the base** and read no TF, so a laser mounted away from the base
+gives scans whose odometry is off by that fixed mounting offset.
+
+Readings: ``ranges`` are kept as the bag has them, NaN and ±inf included; ``Scan.points`` drops
+those, readings below ``MIN_VALID_RANGE`` and readings at or beyond ``max_range``
+(``ReadOptions.max_range``, else the message's ``range_max``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import math
+import sqlite3
+import struct
+import sys
+from collections import Counter
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import suppress
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.rosbag1 import ReaderError as Rosbag1Error
+from rosbags.rosbag2 import ReaderError as Rosbag2Error
+from rosbags.serde import SerdeError
+from rosbags.typesys import Stores, TypesysError, get_typestore
+from tqdm import tqdm
+
+from vgm_studio.core.se2 import wrap_angle
+from vgm_studio.datasets.carmen import file_hash
+from vgm_studio.datasets.options import ReadOptions
+from vgm_studio.datasets.scans import Scan, ScanLog
+from vgm_studio.errors import InputError
+
+if TYPE_CHECKING:
+    from rosbags.interfaces import Connection, TopicInfo
+
+LASER_SCAN_TYPES = frozenset({"sensor_msgs/msg/LaserScan", "sensor_msgs/LaserScan"})
+ODOMETRY_TYPES = frozenset({"nav_msgs/msg/Odometry", "nav_msgs/Odometry"})
+ROS2_STORAGE_SUFFIXES = frozenset({".db3", ".mcap"})
+
+# Seconds a scan may lie before the first or after the last Odometry message and still take it.
+MAX_ODOMETRY_EXTRAPOLATION = 0.5
+
+
+def _optional_error(module: str, name: str) -> tuple[type[Exception], ...]:
+    """An exception class of a module rosbags may use, or nothing when it is not installed."""
+    try:
+        found = getattr(importlib.import_module(module), name, None)
+    except ImportError:
+        return ()
+    return (found,) if isinstance(found, type) and issubclass(found, Exception) else ()
+
+
+# What ``rosbags`` raises on a bag it cannot read: its own errors, and what its parsers and
+# decompressors let through on a damaged file (short reads, bad headers, a broken sqlite
+# database, bad YAML, bad lz4/bz2/zstd data, a damaged length field asking for terabytes).
+_BAG_ERRORS: tuple[type[Exception], ...] = (
+    AnyReaderError,
+    Rosbag1Error,
+    Rosbag2Error,
+    SerdeError,
+    TypesysError,
+    OSError,
+    EOFError,
+    sqlite3.Error,
+    struct.error,
+    ValueError,
+    KeyError,
+    IndexError,
+    TypeError,
+    AttributeError,
+    AssertionError,
+    RuntimeError,
+    MemoryError,
+    *_optional_error("apsw", "Error"),
+    *_optional_error("backports.zstd", "ZstdError"),
+    *_optional_error("zstandard", "ZstdError"),
+)
+
+
+def bag_hash(path: Path) -> str:
+    """sha256 of a bag, hex: of the file's bytes, or for a folder of its files sorted by name.
+
+    For a folder each file contributes its name (relative, ``/``-separated), its size and its
+    bytes, so renaming or moving content between files changes the hash.
+    """
+    if not path.is_dir():
+        return file_hash(path)
+    h = hashlib.sha256()
+    files = sorted((p for p in path.rglob("*") if p.is_file()), key=lambda p: p.relative_to(path))
+    for file in files:
+        h.update(file.relative_to(path).as_posix().encode("utf-8") + b"\0")
+        h.update(file.stat().st_size.to_bytes(8, "little"))
+        with file.open("rb") as f:
+            while block := f.read(1 << 20):
+                h.update(block)
+    return h.hexdigest()
+
+
+def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
+    """Rotation about z of a quaternion, in (−π, π]."""
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def interpolate_odometry(
+    times: NDArray[np.float64],
+    stamps: NDArray[np.float64],
+    poses: NDArray[np.float64],
+    max_extrapolation: float = MAX_ODOMETRY_EXTRAPOLATION,
+) -> NDArray[np.float64]:
+    """Poses (x, y, yaw) at ``times`` from poses at increasing ``stamps``.
+
+    Linear in x, y and unwrapped yaw inside the stamps' span; the nearest pose outside it, up to
+    ``max_extrapolation`` seconds away. Rows for times farther out are NaN.
+    """
+    out = np.full((len(times), 3), np.nan)
+    if len(stamps) == 0:
+        return out
+    yaw = np.unwrap(poses[:, 2])
+    out[:, 0] = np.interp(times, stamps, poses[:, 0])
+    out[:, 1] = np.interp(times, stamps, poses[:, 1])
+    out[:, 2] = wrap_angle(np.interp(times, stamps, yaw))
+    outside = np.maximum(stamps[0] - times, times - stamps[-1])
+    out[outside > max_extrapolation] = np.nan
+    return out
+
+
+@dataclass
+class _RawScan:
+    stamp_ns: int
+    ranges: NDArray[np.float32]
+    angle_min: float
+    angle_increment: float
+    range_max: float
+
+
+def _one_line(err: BaseException) -> str:
+    if isinstance(err, MemoryError):
+        return "out of memory (a damaged length field?)"
+    text = " ".join(str(err).split())
+    return text or type(err).__name__
+
+
+def _bag_error(path: Path, err: BaseException) -> InputError:
+    return InputError(path, f"not a readable ROS bag: {_one_line(err)}")
+
+
+def _describe_topics(topics: Mapping[str, TopicInfo]) -> str:
+    if not topics:
+        return "the bag has no topics"
+    listed = ", ".join(f"{name} ({info.msgtype}, {info.msgcount})" for name, info in topics.items())
+    return f"topics found: {listed}"
+
+
+def _choose_topic(
+    path: Path,
+    topics: Mapping[str, TopicInfo],
+    types: frozenset[str],
+    wanted: str | None,
+    *,
+    what: str,
+    option: str,
+    required: bool,
+) -> str | None:
+    """The topic to read for one message type: the one asked for, else the only one."""
+    candidates = sorted(name for name, info in topics.items() if info.msgtype in types)
+    if wanted is not None:
+        if wanted in candidates:
+            return wanted
+        if wanted in topics:
+            problem = f"{option} {wanted} carries {topics[wanted].msgtype}, not {what}"
+        else:
+            problem = f"{option} {wanted} is not in this bag"
+        raise InputError(path, f"{problem}; {_describe_topics(topics)}")
+    if len(candidates) == 1:
+        return candidates[0]
+    if len(candidates) > 1:
+        raise InputError(
+            path,
+            f"{len(candidates)} {what} topics ({', '.join(candidates)}); choose one with {option}",
+        )
+    if required:
+        raise InputError(path, f"no {what} topic in this bag; {_describe_topics(topics)}")
+    return None
+
+
+def _stamp_ns(msg: Any, receive_ns: int) -> int:
+    stamp = msg.header.stamp
+    ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+    return ns if ns != 0 else int(receive_ns)
+
+
+def _messages(
+    path: Path, reader: AnyReader, connections: Sequence[Connection], total: int
+) -> Iterator[tuple[Connection, int, Any]]:
+    """Deserialised messages in bag order, with a progress bar; rosbags' errors as InputError."""
+    raw_messages = reader.messages(connections=connections)
+    with tqdm(total=total, desc=path.name, unit="msg", file=sys.stderr, disable=None) as bar:
+        while True:
+            try:
+                connection, receive_ns, data = next(raw_messages)
+            except StopIteration:
+                return
+            except _BAG_ERRORS as err:
+                raise _bag_error(path, err) from None
+            try:
+                msg = reader.deserialize(data, connection.msgtype)
+            except _BAG_ERRORS as err:
+                raise InputError(
+                    path,
+                    f"{connection.topic}: cannot decode the {connection.msgtype} message "
+                    f"recorded at {receive_ns / 1e9:.9f} s: {_one_line(err)}",
+                ) from None
+            bar.update()
+            yield connection, receive_ns, msg
+
+
+def _open_reader(path: Path, is_ros1: bool) -> AnyReader:
+    store = Stores.ROS1_NOETIC if is_ros1 else Stores.ROS2_HUMBLE
+    try:
+        reader = AnyReader([path], default_typestore=get_typestore(store))
+        reader.open()
+    except _BAG_ERRORS as err:
+        raise _bag_error(path, err) from None
+    return reader
+
+
+def _check_path(path: Path) -> bool:
+    """Raises unless ``path`` can be a bag; returns whether it is a ROS 1 bag."""
+    if not path.exists():
+        raise InputError(path, "no such file or folder")
+    if path.is_dir():
+        if not (path / "metadata.yaml").is_file():
+            raise InputError(path, "not a ROS 2 bag folder (it has no metadata.yaml)")
+        return False
+    if path.suffix == ".bag":
+        return True
+    if path.suffix in ROS2_STORAGE_SUFFIXES:
+        return False
+    raise InputError(
+        path, "not a ROS bag: expected a .bag file, a ROS 2 bag folder, or a .db3/.mcap file"
+    )
+
+
+def read_rosbag(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
+    """Reads the laser scans, with odometry where the bag has it, from a ROS 1 or ROS 2 bag.
+
+    Args:
+        path: A ROS 1 ``.bag`` file, a ROS 2 bag folder, or a ROS 2 ``.db3``/``.mcap`` file.
+        options: How to read it; ``scan_topic``, ``odom_topic`` and ``max_range`` apply.
+
+    Returns:
+        The scans in the order the bag recorded them. Poses are in ``Scan.odometry``
+        (see the module docstring for how they are timed and framed).
+
+    Raises:
+        InputError: The path is missing or not a bag, the bag cannot be read, the topic to read
+            is missing or ambiguous, or the scan topic holds no messages.
+    """
+    path = Path(path)
+    options = options or ReadOptions()
+    is_ros1 = _check_path(path)
+    raw: list[_RawScan] = []
+    odom_ns: list[int] = []
+    odom_poses: list[tuple[float, float, float]] = []
+    counts: Counter[str] = Counter()
+    reader = _open_reader(path, is_ros1)
+    try:
+        try:
+            topics = reader.topics
+        except _BAG_ERRORS as err:
+            raise _bag_error(path, err) from None
+        scan_topic = _choose_topic(
+            path,
+            topics,
+            LASER_SCAN_TYPES,
+            options.scan_topic,
+            what="sensor_msgs/LaserScan",
+            option="scan_topic",
+            required=True,
+        )
+        odom_topic = _choose_topic(
+            path,
+            topics,
+            ODOMETRY_TYPES,
+            options.odom_topic,
+            what="nav_msgs/Odometry",
+            option="odom_topic",
+            required=False,
+        )
+        read = {t for t in (scan_topic, odom_topic) if t is not None}
+        connections = [c for c in reader.connections if c.topic in read]
+        total = sum(topics[t].msgcount for t in read)
+        ignored = {name: info.msgcount for name, info in topics.items() if name not in read}
+        for connection, receive_ns, msg in _messages(path, reader, connections, total):
+            counts[connection.topic] += 1
+            if connection.topic == scan_topic:
+                raw.append(
+                    _RawScan(
+                        stamp_ns=_stamp_ns(msg, receive_ns),
+                        ranges=np.array(msg.ranges, dtype=np.float32),
+                        angle_min=float(msg.angle_min),
+                        angle_increment=float(msg.angle_increment),
+                        range_max=float(msg.range_max),
+                    )
+                )
+            else:
+                q = msg.pose.pose.orientation
+                pose = (
+                    float(msg.pose.pose.position.x),
+                    float(msg.pose.pose.position.y),
+                    yaw_from_quaternion(float(q.x), float(q.y), float(q.z), float(q.w)),
+                )
+                if all(math.isfinite(v) for v in pose):
+                    odom_ns.append(_stamp_ns(msg, receive_ns))
+                    odom_poses.append(pose)
+    finally:
+        with suppress(*_BAG_ERRORS):
+            reader.close()
+    if not raw:
+        raise InputError(path, f"no messages on the LaserScan topic {scan_topic}")
+
+    odometry = _odometry_at_scans(raw, odom_ns, odom_poses)
+    scans = [
+        Scan(
+            index=i,
+            timestamp=r.stamp_ns / 1e9,
+            ranges=r.ranges,
+            angle_min=r.angle_min,
+            angle_increment=r.angle_increment,
+            max_range=float(options.max_range or _usable_range_max(r)),
+            odometry=None if np.isnan(odometry[i]).any() else odometry[i],
+            reference=None,
+            line=0,
+        )
+        for i, r in enumerate(raw)
+    ]
+    return ScanLog(
+        path=path,
+        format="rosbag1" if is_ros1 else "rosbag2",
+        scans=scans,
+        content_hash=bag_hash(path),
+        pose_source="odometry" if any(s.odometry is not None for s in scans) else None,
+        ignored_messages=ignored,
+        message_counts=dict(counts),
+    )
+
+
+def _usable_range_max(scan: _RawScan) -> float:
+    """The message's ``range_max``; when that is unset (0, negative, NaN), just past the largest
+    finite reading, so every finite reading is a point."""
+    if math.isfinite(scan.range_max) and scan.range_max > 0:
+        return scan.range_max
+    finite = scan.ranges[np.isfinite(scan.ranges)]
+    if finite.size == 0:
+        return 0.0
+    return float(np.nextafter(np.float64(finite.max()), np.inf))
+
+
+def _odometry_at_scans(
+    raw: Sequence[_RawScan],
+    odom_ns: Sequence[int],
+    odom_poses: Sequence[tuple[float, float, float]],
+) -> NDArray[np.float64]:
+    """(N, 3) odometry at the scans' times, NaN rows where there is none.
+
+    Times are taken relative to the first message in integer nanoseconds before going to float,
+    so epoch-sized stamps (~1.7e9 s) keep sub-microsecond resolution.
+    """
+    if not odom_ns:
+        return np.full((len(raw), 3), np.nan)
+    origin = min(odom_ns[0], raw[0].stamp_ns)
+    stamps = np.array([t - origin for t in odom_ns], dtype=np.int64)
+    order = np.argsort(stamps, kind="stable")
+    times = np.array([r.stamp_ns - origin for r in raw], dtype=np.int64)
+    return interpolate_odometry(
+        times.astype(np.float64) / 1e9,
+        stamps[order].astype(np.float64) / 1e9,
+        np.array(odom_poses, dtype=np.float64)[order],
+    )
