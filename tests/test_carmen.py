@@ -27,8 +27,12 @@ def write(tmp_path: Path, lines: list[str], name: str = "test.log") -> Path:
 
 @pytest.mark.parametrize(
     ("beams", "first", "last", "step"),
-    [(180, -90.0, 89.0, 1.0), (181, -90.0, 90.0, 1.0), (360, -90.0, 89.5, 0.5),
-     (361, -90.0, 90.0, 0.5)],
+    [
+        (180, -90.0, 89.0, 1.0),
+        (181, -90.0, 90.0, 1.0),
+        (360, -90.0, 89.5, 0.5),
+        (361, -90.0, 90.0, 0.5),
+    ],
 )
 def test_flaser_beam_convention(beams, first, last, step):
     start, inc = flaser_angles(beams)
@@ -86,8 +90,14 @@ def test_truepos_gives_reference_interpolated_by_time(tmp_path):
     lines = [
         format_pose_message("TRUEPOS", (0, 0, 0), (0, 0, 0), 0.0),
         format_pose_message("TRUEPOS", (2, 0, 1.0), (0, 0, 0), 2.0),
-        format_robotlaser([1.0] * 5, angle_min=-1.0, angle_increment=0.5, max_range=10.0,
-                          laser_pose=(0.9, 0.1, 0.4), timestamp=1.0),
+        format_robotlaser(
+            [1.0] * 5,
+            angle_min=-1.0,
+            angle_increment=0.5,
+            max_range=10.0,
+            laser_pose=(0.9, 0.1, 0.4),
+            timestamp=1.0,
+        ),
     ]
     log = open_log(write(tmp_path, lines))
     scan = log.scans[0]
@@ -98,8 +108,10 @@ def test_truepos_gives_reference_interpolated_by_time(tmp_path):
 
 
 def test_robotlaser_with_remissions(tmp_path):
-    line = ("ROBOTLASER1 0 -1.570796 3.141593 0.785398 81.9 0.01 0 5 1 2 81.9 3 4 2 0.5 0.6 "
-            "1 2 0.3 1 2 0.3 0 0 0 0 0 12.5 host 12.5")
+    line = (
+        "ROBOTLASER1 0 -1.570796 3.141593 0.785398 81.9 0.01 0 5 1 2 81.9 3 4 2 0.5 0.6 "
+        "1 2 0.3 1 2 0.3 0 0 0 0 0 12.5 host 12.5"
+    )
     log = open_log(write(tmp_path, [line]))
     scan = log.scans[0]
     assert scan.num_beams == 5 and scan.timestamp == 12.5

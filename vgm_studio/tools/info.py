@@ -14,7 +14,11 @@ from vgm_studio.datasets.scans import ScanLog
 def summarize(log: ScanLog) -> dict[str, Any]:
     """Counts, beams, field of view, duration, poses present and distance travelled."""
     beams = Counter(s.num_beams for s in log.scans)
-    fovs = Counter(round(math.degrees(s.fov), 2) for s in log.scans)
+    fovs = Counter(
+        f"{math.degrees(s.angle_min):+g}° … {math.degrees(s.angle_min + s.fov):+g}° "
+        f"in {math.degrees(s.angle_increment):.3g}° steps"
+        for s in log.scans
+    )
     stamps = log.timestamps
     finite = stamps[np.isfinite(stamps)]
     duration = float(finite.max() - finite.min()) if len(finite) > 1 else 0.0
@@ -25,7 +29,7 @@ def summarize(log: ScanLog) -> dict[str, Any]:
         "sha256": log.content_hash,
         "scans": len(log.scans),
         "beams": dict(sorted(beams.items())),
-        "fov_deg": dict(sorted(fovs.items())),
+        "beam_angles": dict(sorted(fovs.items())),
         "max_range": sorted({round(s.max_range, 3) for s in log.scans}),
         "mean_points_per_scan": float(np.mean(points)) if points else 0.0,
         "duration_s": duration,
@@ -56,7 +60,7 @@ def format_summary(s: dict[str, Any]) -> str:
         ("format", s["format"]),
         ("scans", f"{s['scans']:,}"),
         ("beams", _counts(s["beams"])),
-        ("field of view", _counts(s["fov_deg"], "°")),
+        ("beam angles", _counts(s["beam_angles"])),
         ("max range", ", ".join(f"{r:g} m" for r in s["max_range"])),
         ("points per scan", f"{s['mean_points_per_scan']:.0f} (mean)"),
         ("duration", dur),
