@@ -105,6 +105,7 @@ def test_truepos_gives_reference_interpolated_by_time(tmp_path):
     np.testing.assert_allclose(scan.odometry, [0.9, 0.1, 0.4], atol=1e-6)
     assert scan.angle_min == pytest.approx(-1.0) and scan.angle_increment == pytest.approx(0.5)
     assert scan.max_range == pytest.approx(10.0)
+    assert log.pose_source == "odometry" and log.reference_origin == "TRUEPOS"
 
 
 def test_robotlaser_with_remissions(tmp_path):

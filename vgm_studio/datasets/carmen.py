@@ -290,7 +290,14 @@ def read_carmen(path: str | Path, options: ReadOptions | None = None) -> ScanLog
         format="carmen",
         scans=scans,
         content_hash=file_hash(path),
-        pose_source="reference" if reference_from_truepos is not None else source,
+        pose_source=source,
+        reference_origin=(
+            "TRUEPOS"
+            if reference_from_truepos is not None
+            else "pose fields"
+            if source == "reference"
+            else None
+        ),
         skipped_lines=bad,
         ignored_messages=dict(ignored),
         message_counts=dict(counts),
@@ -314,9 +321,9 @@ def format_robotlaser(
     fields = [
         "ROBOTLASER1",
         "0",
-        f"{angle_min:.6f}",
-        f"{fov:.6f}",
-        f"{angle_increment:.6f}",
+        f"{angle_min:.9f}",
+        f"{fov:.9f}",
+        f"{angle_increment:.9f}",
         f"{max_range:.3f}",
         "0.010",
         "0",

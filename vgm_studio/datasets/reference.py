@@ -42,4 +42,4 @@ def with_reference(log: ScanLog, reference: ScanLog, tolerance: float = 0.05) ->
             f"no scan timestamp matches {log.path} within "
             f"{tolerance} s (do both logs use the same clock?)",
         )
-    return dataclasses.replace(log, scans=scans)
+    return dataclasses.replace(log, scans=scans, reference_origin=str(reference.path))

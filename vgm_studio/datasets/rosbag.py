@@ -379,7 +379,8 @@ def _usable_range_max(scan: _RawScan) -> float:
     finite = scan.ranges[np.isfinite(scan.ranges)]
     if finite.size == 0:
         return 0.0
-    return float(np.nextafter(np.float64(finite.max()), np.inf))
+    # Next float32 up: Scan.points compares in float32, as ranges are stored.
+    return float(np.nextafter(np.float32(finite.max()), np.float32(np.inf)))
 
 
 def _odometry_at_scans(

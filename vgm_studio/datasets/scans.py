@@ -49,22 +49,30 @@ class Scan:
 
     def points(self) -> NDArray[np.float64]:
         """Returns the (N, 2) valid end points in the sensor frame."""
-        r = self.ranges.astype(np.float64)
-        a = self.angles()
-        keep = (r >= MIN_VALID_RANGE) & (r < self.max_range) & np.isfinite(r)
-        r, a = r[keep], a[keep]
+        # Compare in float32, as ranges are stored: a no-return written as exactly max_range
+        # must not come back as a point 1e-7 m short of it.
+        r32 = self.ranges
+        keep = (r32 >= MIN_VALID_RANGE) & (r32 < np.float32(self.max_range)) & np.isfinite(r32)
+        r, a = r32[keep].astype(np.float64), self.angles()[keep]
         return np.stack([r * np.cos(a), r * np.sin(a)], axis=1).astype(np.float64)
 
 
 @dataclass
 class ScanLog:
-    """All scans of one log plus what the reader learnt about it."""
+    """All scans of one log plus what the reader learnt about it.
+
+    Attributes:
+        pose_source: What the scan messages' pose fields hold.
+        reference_origin: Where reference poses come from (``pose fields``, ``TRUEPOS``, or a
+            reference log's path), None without any.
+    """
 
     path: Path
     format: str
     scans: list[Scan]
     content_hash: str
     pose_source: PoseSource | None = None
+    reference_origin: str | None = None
     skipped_lines: int = 0
     ignored_messages: dict[str, int] = field(default_factory=dict)
     message_counts: dict[str, int] = field(default_factory=dict)
