@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import cv2
+import numpy as np
 import pytest
 
 
@@ -87,7 +88,10 @@ def test_candidates_on_intel_give_both_labels_and_stable_ids(datasets, tmp_path,
     png = artifacts / "intel-success-edge.png"
     run("vgm", out1, "--edge", success["edge_id"][:10], "--png", png)
     img = cv2.imread(str(png))
-    assert img is not None and img.shape[1] == 800 and img.shape[0] > 800
+    assert img is not None and 600 <= img.shape[1] <= 800 and img.shape[0] > img.shape[1]
+    # Both scans are drawn, each in its own colour.
+    for bgr in ((255, 170, 40), (30, 140, 255)):
+        assert (np.abs(img.astype(int) - bgr).sum(axis=2) < 30).sum() > 200
     bad = run("vgm", out1, "--edge", "zzzz", "--png", png, ok=False)
     assert bad.returncode == 1 and "no edge with id 'zzzz'" in one_line_error(bad)
 

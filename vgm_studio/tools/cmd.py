@@ -26,7 +26,7 @@ app = typer.Typer(
 )
 
 ASSETS = Path(__file__).resolve().parents[2]
-DEMO_LOG = ASSETS / "datasets" / "demo" / "demo-seed7.log"
+DEMO_LOG = ASSETS / "datasets" / "demo-seed0.log"
 
 
 class Poses(str, Enum):
@@ -133,6 +133,10 @@ def simulate(
     range_noise: Annotated[float, typer.Option(help="Range noise σ, metres.")] = 0.01,
     max_range: Annotated[float, typer.Option(help="Sensor maximum range, metres.")] = 30.0,
     people: Annotated[int, typer.Option(help="Moving people in the world.")] = 0,
+    scan_spacing: Annotated[float, typer.Option(help="Metres travelled between scans.")] = 0.1,
+    laps: Annotated[
+        float | None, typer.Option(help="Laps of the route [default: the preset's].")
+    ] = None,
 ) -> None:
     """Write a simulated CARMEN log (TRUEPOS ground truth, noisy odometry) by ray casting."""
     from vgm_studio.simulation.simulate import SimConfig
@@ -146,6 +150,8 @@ def simulate(
         range_noise=range_noise,
         max_range=max_range,
         people=people,
+        scan_spacing=scan_spacing,
+        laps=laps,
     )
     path = run(config, out)
     typer.echo(f"wrote {path}")

@@ -25,7 +25,7 @@ def run_demo(log_path: Path, out: Path) -> None:
         raise InputError(
             log_path,
             "bundled demo log missing; remake it with the command in "
-            "README.md (vgm-studio simulate --preset demo --seed 7 ...)",
+            "README.md (vgm-studio simulate --out datasets --preset demo --seed 0)",
         )
     options = ReadOptions()
     log = open_log(log_path, options)

@@ -35,6 +35,7 @@ def summarize(log: ScanLog) -> dict[str, Any]:
         "duration_s": duration,
         "odometry": log.has_odometry,
         "reference": log.has_reference,
+        "reference_origin": log.reference_origin,
         "pose_fields": log.pose_source,
         "travelled_m": log.travelled_distance(),
         "skipped_lines": log.skipped_lines,
@@ -51,7 +52,7 @@ def format_summary(s: dict[str, Any]) -> str:
     duration = s["duration_s"]
     dur = f"{duration:.1f} s ({duration / 60:.1f} min)" if duration > 0 else "unknown (no clock)"
     pose_note = {
-        "reference": "reference (corrected log or TRUEPOS)",
+        "reference": "reference (corrected log)",
         "odometry": "odometry (raw log)",
         None: "none",
     }[s["pose_fields"]]
@@ -65,7 +66,7 @@ def format_summary(s: dict[str, Any]) -> str:
         ("points per scan", f"{s['mean_points_per_scan']:.0f} (mean)"),
         ("duration", dur),
         ("odometry", "yes" if s["odometry"] else "no"),
-        ("reference poses", "yes" if s["reference"] else "no"),
+        ("reference poses", f"yes ({s['reference_origin']})" if s["reference"] else "no"),
         ("scan pose fields", pose_note),
         ("travelled", f"{s['travelled_m']:.1f} m"),
     ]

@@ -42,10 +42,13 @@ def draw_pair(
     estimate: NDArray[np.float64],
     *,
     resolution: float,
-    scale: int = 2,
+    width: int = 800,
     caption: Caption | None = None,
 ) -> NDArray[np.uint8]:
     """Draws the VGM heatmap, both scans' points and both sensor poses, as a BGR image.
+
+    The view is the square of cells around everything drawn (plus a 1 m margin), scaled up
+    to about ``width`` pixels so single cells stay visible.
 
     Args:
         vgm: (2, size, size) VGM of the pair.
@@ -53,32 +56,56 @@ def draw_pair(
         cur_points: Current scan's points in its own frame (moved here by ``estimate``).
         estimate: Pose of the current scan in the previous scan's frame.
         resolution: VGM cell edge, metres.
-        scale: Pixels per cell.
+        width: Picture width in pixels, roughly.
         caption: Text lines above the picture.
     """
     size = vgm.shape[-1]
+    half = 0.5 * size * resolution
+    moved = se2.transform_points(estimate, cur_points)
+    i0, i1, j0, j1 = _view(
+        np.vstack([prev_points, moved, [[0.0, 0.0], estimate[:2]]]), size, resolution
+    )
+    scale = max(2, width // (j1 - j0))
+    crop = heatmap(vgm[:, i0:i1, j0:j1])
     img: NDArray[np.uint8] = np.asarray(
-        cv2.resize(heatmap(vgm), (size * scale, size * scale), interpolation=cv2.INTER_NEAREST),
+        cv2.resize(
+            crop, (crop.shape[1] * scale, crop.shape[0] * scale), interpolation=cv2.INTER_NEAREST
+        ),
         dtype=np.uint8,
     )
-    half = 0.5 * size * resolution
     px_per_m = scale / resolution
+    # Pixel (0, 0) is the top-left corner of cell (i1 − 1, j0): +y is up in the picture.
+    x0, y1 = -half + j0 * resolution, -half + i1 * resolution
 
     def to_px(pts: NDArray[np.float64]) -> NDArray[np.int32]:
-        u = (pts[:, 0] + half) * px_per_m
-        v = (half - pts[:, 1]) * px_per_m
+        u = (pts[:, 0] - x0) * px_per_m
+        v = (y1 - pts[:, 1]) * px_per_m
         return np.round(np.column_stack([u, v])).astype(np.int32)
 
-    moved = se2.transform_points(estimate, cur_points)
+    radius = max(1, scale // 4)
     for pts, colour in ((prev_points, PREV_BGR), (moved, CUR_BGR)):
         for u, v in to_px(pts):
-            cv2.circle(img, (int(u), int(v)), 2, tuple(int(c) for c in colour), -1, cv2.LINE_AA)
+            cv2.circle(
+                img, (int(u), int(v)), radius, tuple(int(c) for c in colour), -1, cv2.LINE_AA
+            )
     for pose, colour in ((np.zeros(3), PREV_BGR), (np.asarray(estimate), CUR_BGR)):
         _draw_pose(img, pose, to_px, px_per_m, tuple(int(c) for c in colour))
     _draw_scale_bar(img, px_per_m)
     if caption is not None:
         img = _add_caption(img, caption)
     return img
+
+
+def _view(points: NDArray[np.float64], size: int, resolution: float) -> tuple[int, int, int, int]:
+    """Rows i0:i1 and columns j0:j1 of the square of cells around ``points`` plus 1 m."""
+    half = 0.5 * size * resolution
+    lo = np.clip(np.floor((points.min(axis=0) - 1.0 + half) / resolution), 0, size)
+    hi = np.clip(np.ceil((points.max(axis=0) + 1.0 + half) / resolution), 0, size)
+    side = int(max(hi - lo))
+    centre = (lo + hi) / 2
+    start = np.clip(np.round(centre - side / 2), 0, size - side).astype(int)
+    j0, i0 = int(start[0]), int(start[1])
+    return i0, i0 + side, j0, j0 + side
 
 
 def _draw_pose(
@@ -101,10 +128,18 @@ def _draw_pose(
 
 def _draw_scale_bar(img: NDArray[np.uint8], px_per_m: float) -> None:
     h = img.shape[0]
-    length = round(2.0 * px_per_m)
+    metres = 1 if img.shape[1] < 4 * px_per_m else 2 if img.shape[1] < 12 * px_per_m else 5
+    length = round(metres * px_per_m)
     cv2.line(img, (20, h - 20), (20 + length, h - 20), (230, 230, 230), 2)
     cv2.putText(
-        img, "2 m", (20, h - 28), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (230, 230, 230), 1, cv2.LINE_AA
+        img,
+        f"{metres} m",
+        (20, h - 28),
+        cv2.FONT_HERSHEY_SIMPLEX,
+        0.5,
+        (230, 230, 230),
+        1,
+        cv2.LINE_AA,
     )
 
 
