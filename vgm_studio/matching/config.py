@@ -21,6 +21,8 @@ class MatchConfig:
         refine_distance: Correspondences farther than this are dropped by the refinement.
         inlier_distance: A point whose point-to-line residual is below this is an inlier.
         normal_neighbors: Neighbours used to fit each target point's local line.
+        degeneracy: The refinement leaves directions whose curvature is below this share of
+            the largest where kiss-icp put them (along a featureless corridor, say).
     """
 
     max_range: float = 30.0
@@ -33,3 +35,4 @@ class MatchConfig:
     refine_distance: float = 0.3
     inlier_distance: float = 0.05
     normal_neighbors: int = 6
+    degeneracy: float = 0.005

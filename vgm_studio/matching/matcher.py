@@ -61,23 +61,25 @@ class ScanMatcher:
     def __init__(self, config: MatchConfig | None = None) -> None:
         self.config = config or MatchConfig()
         self._kiss = KissRegistration(self.config)
-        self._cache: dict[int, _Prepared] = {}
+        # Keyed by id(scan); the scan is kept alongside so its id cannot be reused.
+        self._cache: dict[int, tuple[Scan, _Prepared]] = {}
 
     def points(self, scan: Scan) -> NDArray[np.float64]:
         return self._prepare(scan).points
 
     def _prepare(self, scan: Scan) -> _Prepared:
-        hit = self._cache.get(id(scan))
-        if hit is None:
-            pts = scan.points()
-            pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= self.config.max_range]
-            ok = len(pts) >= 3
-            hit = _Prepared(
-                points=pts,
-                voxel_map=self._kiss.target_map(pts) if ok else None,
-                target=Target.build(pts, self.config.normal_neighbors) if ok else None,
-            )
-            self._cache[id(scan)] = hit
+        cached = self._cache.get(id(scan))
+        if cached is not None:
+            return cached[1]
+        pts = scan.points()
+        pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= self.config.max_range]
+        ok = len(pts) >= 3
+        hit = _Prepared(
+            points=pts,
+            voxel_map=self._kiss.target_map(pts) if ok else None,
+            target=Target.build(pts, self.config.normal_neighbors) if ok else None,
+        )
+        self._cache[id(scan)] = (scan, hit)
         return hit
 
     def forget(self, scan: Scan) -> None:
@@ -108,6 +110,7 @@ class ScanMatcher:
             max_iterations=self.config.refine_iterations,
             max_distance=self.config.refine_distance,
             inlier_distance=self.config.inlier_distance,
+            degeneracy=self.config.degeneracy,
         )
         return MatchResult(
             r.estimate, r.iterations, r.converged, r.inlier_ratio, r.residual, r.covariance, kiss

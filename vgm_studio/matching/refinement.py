@@ -25,6 +25,7 @@ class Target:
 
     @classmethod
     def build(cls, points: NDArray[np.float64], neighbors: int = 6) -> Target:
+        """Args: points (N, 2); neighbors: nearest points used to fit each local line."""
         tree = cKDTree(points)
         k = min(neighbors, len(points))
         _, idx = tree.query(points, k=k)
@@ -72,6 +73,28 @@ def _residuals(
     return r, n, moved, found
 
 
+# Radians are scaled to metres at this lever arm when comparing curvatures across x, y, θ.
+_LEVER = 5.0
+
+
+def _constrained_step(
+    h: NDArray[np.float64], g: NDArray[np.float64], degeneracy: float
+) -> NDArray[np.float64] | None:
+    """Gauss-Newton step restricted to well-constrained directions (solution remapping)."""
+    scale = np.array([1.0, 1.0, 1.0 / _LEVER])
+    hs = h * np.outer(scale, scale)
+    gs = g * scale
+    try:
+        lam, vec = np.linalg.eigh(hs)
+    except np.linalg.LinAlgError:
+        return None
+    if lam[-1] <= 0:
+        return None
+    keep = lam > degeneracy * lam[-1]
+    step = -(vec[:, keep] @ ((vec[:, keep].T @ gs) / lam[keep]))
+    return np.asarray(step * scale, dtype=np.float64)
+
+
 def refine(
     target: Target,
     source: NDArray[np.float64],
@@ -81,6 +104,7 @@ def refine(
     max_distance: float = 0.3,
     inlier_distance: float = 0.05,
     tolerance: float = 1e-6,
+    degeneracy: float = 0.005,
 ) -> Refinement:
     """Refines ``guess``, the pose of ``source`` points in the target frame.
 
@@ -93,6 +117,8 @@ def refine(
         inlier_distance: Residual below which a correspondence counts as an inlier; also the
             Huber threshold.
         tolerance: Stop when the update's norm (metres and radians) falls below this.
+        degeneracy: Directions whose curvature is below this share of the largest are left
+            where the guess put them (along a featureless corridor, say).
     """
     pose = np.asarray(guess, dtype=np.float64).copy()
     converged = False
@@ -108,9 +134,8 @@ def refine(
         w = np.minimum(1.0, inlier_distance / np.maximum(np.abs(r), 1e-12))
         h = jac.T @ (jac * w[:, None])
         g = jac.T @ (w * r)
-        try:
-            delta = -np.linalg.solve(h, g)
-        except np.linalg.LinAlgError:
+        delta = _constrained_step(h, g, degeneracy)
+        if delta is None:
             break
         pose = pose + delta
         pose[2] = float(se2.wrap_angle(pose[2]))
