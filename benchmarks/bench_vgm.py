@@ -27,7 +27,7 @@ def main() -> None:
     from vgm_studio.vgm import pair_map
 
     plain = _plain_loop()
-    log = open_log(datasets_dir() / "radish-corrected" / "seattle-corrected.log")
+    log = open_log(datasets_dir() / "radish-corrected" / "belgioioso-corrected.log")
     a, b = log.scans[100], log.scans[101]
     prev, cur = a.points()[:360], b.points()[:360]
     est = se2.between(a.reference, b.reference)
@@ -38,7 +38,7 @@ def main() -> None:
         plain(se2.transform_points(est, cur))
 
     slow = median_time(loop, repeat=10, warmup=1)
-    print(f"# pair_map, {len(prev)} + {len(cur)} points (seattle scans 100/101), 1 core")
+    print(f"# pair_map, {len(prev)} + {len(cur)} points (belgioioso scans 100/101), 1 core")
     print(f"# {machine()}")
     print(
         table(

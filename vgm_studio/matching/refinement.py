@@ -103,7 +103,7 @@ def refine(
     max_iterations: int = 30,
     max_distance: float = 0.3,
     inlier_distance: float = 0.05,
-    tolerance: float = 1e-6,
+    tolerance: float = 5e-4,
     degeneracy: float = 0.005,
 ) -> Refinement:
     """Refines ``guess``, the pose of ``source`` points in the target frame.
@@ -116,7 +116,8 @@ def refine(
         max_distance: Nearest-neighbour gate for correspondences, in metres.
         inlier_distance: Residual below which a correspondence counts as an inlier; also the
             Huber threshold.
-        tolerance: Stop when the update's norm (metres and radians) falls below this.
+        tolerance: Stop when the update's norm (metres and radians) falls below this;
+            nearest neighbours switching back and forth leave ~0.2 mm steps forever.
         degeneracy: Directions whose curvature is below this share of the largest are left
             where the guess put them (along a featureless corridor, say).
     """
