@@ -341,3 +341,14 @@ def test_people_occlude_walls_and_move(tmp_path: Path) -> None:
     # Other presets carry walkways for people too.
     for name in preset_names():
         assert len(plan(SimConfig(preset=name, people=2)).world.people) == 2
+
+
+def test_bundled_demo_log_is_remade_by_its_command(tmp_path: Path) -> None:
+    """The shipped demo log is exactly what README's command makes (same seed, same bytes)."""
+    bundled = Path(__file__).resolve().parents[1] / "datasets" / "demo-seed0.log"
+    made = simulate(SimConfig(preset="demo", seed=0), tmp_path)
+    assert made.name == bundled.name
+    if made.read_bytes() != bundled.read_bytes():
+        pairs = zip(made.read_text().splitlines(), bundled.read_text().splitlines(), strict=False)
+        first = next(i for i, (a, b) in enumerate(pairs, 1) if a != b)
+        pytest.fail(f"{bundled.name} differs from a fresh simulation at line {first}")
