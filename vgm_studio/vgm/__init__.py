@@ -1,5 +1,5 @@
 """Stage 3: a matched scan pair → its Validation Grid Map (and pictures of it)."""
 
-from vgm_studio.vgm.grid import grid_map, pair_map
+from vgm_studio.vgm.grid import VGMParams, grid_map, pair_map
 
-__all__ = ["grid_map", "pair_map"]
+__all__ = ["VGMParams", "grid_map", "pair_map"]

@@ -8,6 +8,8 @@ exp(−½ (c−μ)ᵀ Σ⁻¹ (c−μ)) · n / n_max, c being the cell centre an
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -16,6 +18,57 @@ from vgm_studio.core import se2
 DEFAULT_SIZE = 400
 DEFAULT_RESOLUTION = 0.05
 DEFAULT_SIGMA = 0.02
+
+
+@dataclass(frozen=True)
+class VGMParams:
+    """The three numbers a VGM depends on; a model is only valid for the VGMs it was trained on.
+
+    Attributes:
+        size: Cells per side.
+        resolution: Cell edge, metres.
+        sigma: Isotropic covariance regulariser, metres.
+    """
+
+    size: int = DEFAULT_SIZE
+    resolution: float = DEFAULT_RESOLUTION
+    sigma: float = DEFAULT_SIGMA
+
+
+def grid_cells(
+    points: ArrayLike,
+    *,
+    size: int = DEFAULT_SIZE,
+    resolution: float = DEFAULT_RESOLUTION,
+    sigma: float = DEFAULT_SIGMA,
+) -> tuple[NDArray[np.int64], NDArray[np.float32]]:
+    """The occupied cells of one VGM channel: flat indices i·size + j and their values.
+
+    Lets callers write a VGM into any layout (a batch, space-to-depth folded) without a dense
+    intermediate. ``grid_map`` documents the arguments.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    half = 0.5 * size * resolution
+    ij = np.floor((pts + half) / resolution)
+    inside = np.all((ij >= 0) & (ij < size), axis=1)
+    if not inside.any():
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float32)
+    ij = ij[inside].astype(np.int64)
+    # Work in offsets from each point's cell centre: small numbers, so the moments stay exact.
+    d = pts[inside] - ((ij + 0.5) * resolution - half)
+    cell, inv, n = np.unique(ij[:, 1] * size + ij[:, 0], return_inverse=True, return_counts=True)
+    dx, dy = d[:, 0], d[:, 1]
+    mx = np.bincount(inv, dx) / n
+    my = np.bincount(inv, dy) / n
+    var = sigma * sigma
+    sxx = np.bincount(inv, dx * dx) / n - mx * mx + var
+    syy = np.bincount(inv, dy * dy) / n - my * my + var
+    sxy = np.bincount(inv, dx * dy) / n - mx * my
+    det = sxx * syy - sxy * sxy
+    # (c − μ) = −(mx, my); the quadratic form with the 2×2 inverse written out.
+    mahal = (syy * mx * mx - 2.0 * sxy * mx * my + sxx * my * my) / det
+    value = np.exp(-0.5 * mahal) * (n / n.max())
+    return cell, value.astype(np.float32)
 
 
 def grid_map(
@@ -37,28 +90,8 @@ def grid_map(
         float32 array (size, size); row i runs along y, column j along x.
     """
     out = np.zeros((size, size), dtype=np.float32)
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    half = 0.5 * size * resolution
-    ij = np.floor((pts + half) / resolution)
-    inside = np.all((ij >= 0) & (ij < size), axis=1)
-    if not inside.any():
-        return out
-    ij = ij[inside].astype(np.int64)
-    # Work in offsets from each point's cell centre: small numbers, so the moments stay exact.
-    d = pts[inside] - ((ij + 0.5) * resolution - half)
-    cell, inv, n = np.unique(ij[:, 1] * size + ij[:, 0], return_inverse=True, return_counts=True)
-    dx, dy = d[:, 0], d[:, 1]
-    mx = np.bincount(inv, dx) / n
-    my = np.bincount(inv, dy) / n
-    var = sigma * sigma
-    sxx = np.bincount(inv, dx * dx) / n - mx * mx + var
-    syy = np.bincount(inv, dy * dy) / n - my * my + var
-    sxy = np.bincount(inv, dx * dy) / n - mx * my
-    det = sxx * syy - sxy * sxy
-    # (c − μ) = −(mx, my); the quadratic form with the 2×2 inverse written out.
-    mahal = (syy * mx * mx - 2.0 * sxy * mx * my + sxx * my * my) / det
-    value = np.exp(-0.5 * mahal) * (n / n.max())
-    out.ravel()[cell] = value.astype(np.float32)
+    cell, value = grid_cells(points, size=size, resolution=resolution, sigma=sigma)
+    out.ravel()[cell] = value
     return out
 
 

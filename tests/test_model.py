@@ -1,0 +1,206 @@
+"""Models: metrics, features, training a tiny model, checkpoints and the Validator API."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from vgm_studio.datasets import open_log
+from vgm_studio.errors import InputError
+from vgm_studio.matching.candidates import CandidateConfig, make_candidates
+from vgm_studio.matching.edges import write_edges
+from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.model.features import PairSample, rgb_plot, vgm_batch
+from vgm_studio.model.metrics import binary_metrics, roc_auc
+from vgm_studio.model.training import (
+    TrainConfig,
+    choose_threshold,
+    read_labelled,
+    stratified_split,
+    train,
+)
+from vgm_studio.model.validator import Validator
+from vgm_studio.simulation.simulate import SimConfig, simulate
+from vgm_studio.vgm import VGMParams, pair_map
+
+
+def test_metrics_against_hand_computed_values():
+    labels = [True, True, False, False, True]
+    probs = [0.9, 0.4, 0.3, 0.6, 0.8]
+    m = binary_metrics(labels, probs)
+    # At 0.5: TP = {0.9, 0.8}, FN = {0.4}, FP = {0.6}, TN = {0.3}.
+    assert (m["tp"], m["fn"], m["fp"], m["tn"], m["n"]) == (2, 1, 1, 1, 5)
+    assert m["accuracy"] == pytest.approx(3 / 5)
+    assert m["precision"] == pytest.approx(2 / 3)
+    assert m["recall"] == pytest.approx(2 / 3)
+    assert m["f1"] == pytest.approx(2 / 3)
+    # 5 of the 6 (positive, negative) pairs are ordered right.
+    assert m["auc"] == pytest.approx(5 / 6)
+    assert binary_metrics(labels, probs, threshold=0.35)["tp"] == 3
+    # A tie counts one half.
+    assert roc_auc([True, False], [0.5, 0.5]) == pytest.approx(0.5)
+    assert np.isnan(roc_auc([True, True], [0.1, 0.2]))
+    nothing_predicted = binary_metrics([True, False], [0.1, 0.2])
+    assert nothing_predicted["precision"] == 0.0 and nothing_predicted["f1"] == 0.0
+
+
+def test_threshold_chosen_on_validation():
+    labels = np.array([True] * 8 + [False] * 2)
+    probs = np.array([0.3] * 8 + [0.1] * 2)
+    cut = choose_threshold(labels, probs)
+    assert 0.1 < cut <= 0.3
+    assert binary_metrics(labels, probs, cut)["accuracy"] == 1.0
+
+
+def test_split_holds_out_every_group_and_label():
+    labels = np.array([True] * 40 + [False] * 20 + [True] * 30 + [False] * 10)
+    groups = ["a"] * 60 + ["b"] * 40
+    tr, va = stratified_split(labels, groups, 0.25, seed=1)
+    assert len(set(tr) & set(va)) == 0 and len(tr) + len(va) == 100
+    for g, y, n in (("a", True, 40), ("a", False, 20), ("b", True, 30), ("b", False, 10)):
+        held = [i for i in va if groups[i] == g and labels[i] == y]
+        assert len(held) == round(0.25 * n)
+    assert np.array_equal(stratified_split(labels, groups, 0.25, seed=1)[1], va)
+
+
+def test_folded_vgm_batch_equals_pixel_unshuffle_of_pair_map():
+    rng = np.random.default_rng(0)
+    samples = [
+        PairSample(
+            rng.normal(0, 4, (300, 2)).astype(np.float32),
+            rng.normal(0, 4, (280, 2)).astype(np.float32),
+            0.5,
+            0.01,
+        )
+        for _ in range(3)
+    ]
+    params = VGMParams()
+    dense = vgm_batch(samples, params)
+    np.testing.assert_array_equal(dense[1], pair_map(samples[1].prev, samples[1].cur, [0, 0, 0]))
+    folded = vgm_batch(samples, params, fold=4)
+    want = torch.nn.PixelUnshuffle(4)(torch.from_numpy(dense)).numpy()
+    np.testing.assert_array_equal(folded, want)
+    turned = vgm_batch(samples[:1], params, rotations=[np.pi])
+    # A half turn mirrors the grid through its centre.
+    np.testing.assert_allclose(turned[0], dense[0][:, ::-1, ::-1], atol=1e-5)
+
+
+def test_rgb_plot_colours():
+    s = PairSample(np.array([[1.0, 0.0]], np.float32), np.array([[0.0, 5.0]], np.float32), 1, 0)
+    img = rgb_plot(s, size=200, extent=20.0)
+    # +x right, +y up: (1, 0) is right of centre, (0, 5) above it.
+    assert img[100, 110, 0] == 255 and img[100, 110, 1] == 0
+    assert img[50, 100, 1] == 255 and img[50, 100, 0] == 0
+
+
+@pytest.fixture(scope="module")
+def sim_edges(tmp_path_factory):
+    """Labelled edges of two simulated logs: one to train on, one held out."""
+    folder = tmp_path_factory.mktemp("edges")
+    files = []
+    for name, seed in (("train", 21), ("held", 22)):
+        log = open_log(
+            simulate(SimConfig(preset="repetitive", seed=seed, laps=1.2, num_beams=181), folder)
+        )
+        edges = make_candidates(
+            log,
+            ScanMatcher(),
+            CandidateConfig(max_loops=500, seed=seed, keyframe_distance=1.0),
+            progress=False,
+        )
+        files.append(folder / f"{name}.jsonl")
+        write_edges(files[-1], edges)
+    return files
+
+
+def test_tiny_model_beats_chance_on_held_out_log(sim_edges, tmp_path):
+    data = read_labelled([sim_edges[0]], progress=False)
+    held = read_labelled([sim_edges[1]], progress=False)
+    assert data.labels.sum() > 30 and (~data.labels).sum() > 30
+    config = TrainConfig(
+        model="vgmnet",
+        epochs=3,
+        epoch_size=768,
+        batch_size=32,
+        seed=0,
+        device="cpu",
+        hyper={"figures": False},
+    )
+    out = tmp_path / "tiny.pt"
+    payload = train(data, config, out, progress=False, log=lambda _: None)
+    assert out.is_file() and len(payload["training"]["config"]) > 5
+    validator = Validator.load(out)
+    probs = validator.predict_samples(held.samples)
+    m = binary_metrics(held.labels, probs, validator.threshold)
+    balanced = 0.5 * (m["tp"] / (m["tp"] + m["fn"]) + m["tn"] / (m["tn"] + m["fp"]))
+    # Chance is 0.5 for both; three short epochs on one small log already do much better.
+    assert m["auc"] > 0.65, m
+    assert balanced > 0.58, m
+
+
+def test_checkpoint_round_trip_and_refusals(sim_edges, tmp_path):
+    data = read_labelled([sim_edges[0]], progress=False)
+    out = tmp_path / "score.pt"
+    payload = train(data, TrainConfig(model="score"), out, progress=False, log=lambda _: None)
+    assert payload["training"]["files"][0]["sha256"]
+    assert payload["training"]["counts"]["train"]["failure"] > 0
+    v = Validator.load(out, expect_vgm=VGMParams())
+    assert v.name == "score" and v.vgm == VGMParams()
+    assert v.metrics["n"] == sum(payload["training"]["counts"]["validation"].values())
+    again = Validator.load(out)
+    np.testing.assert_array_equal(
+        v.predict_samples(data.samples[:20]), again.predict_samples(data.samples[:20])
+    )
+
+    with pytest.raises(InputError, match=r"trained on VGMs of size 400.*size 200"):
+        Validator.load(out, expect_vgm=replace(VGMParams(), size=200))
+    broken = tmp_path / "broken.pt"
+    broken.write_bytes(out.read_bytes()[:100])
+    with pytest.raises(InputError, match="not a readable model checkpoint"):
+        Validator.load(broken)
+    foreign = tmp_path / "foreign.pt"
+    torch.save({"weights": torch.zeros(3)}, foreign)
+    with pytest.raises(InputError, match="not a VGM Studio model"):
+        Validator.load(foreign)
+    with pytest.raises(InputError, match="no such model file"):
+        Validator.load(tmp_path / "none.pt")
+
+
+def test_validator_predicts_edges_from_their_logs(sim_edges, tmp_path):
+    data = read_labelled([sim_edges[1]], progress=False)
+    out = tmp_path / "rgb.pt"
+    train(
+        data,
+        TrainConfig(model="rgb-baseline", epochs=1, epoch_size=64, batch_size=32, device="cpu"),
+        out,
+        progress=False,
+        log=lambda _: None,
+    )
+    v = Validator.load(out)
+    p_edges = v.predict(data.edges[:10])
+    p_samples = v.predict_samples(data.samples[:10])
+    np.testing.assert_allclose(p_edges, p_samples, atol=1e-6)
+    assert np.all((p_edges >= 0) & (p_edges <= 1))
+    assert v.decide(np.array([v.threshold, v.threshold - 0.01])).tolist() == [True, False]
+
+
+def test_unknown_model_and_one_class(sim_edges, tmp_path):
+    data = read_labelled([sim_edges[0]], progress=False)
+    with pytest.raises(InputError, match="unknown model"):
+        train(data, TrainConfig(model="resnet"), tmp_path / "x.pt", progress=False)
+    only = replace(data, labels=np.ones_like(data.labels))
+    with pytest.raises(InputError, match="both success and failure"):
+        train(only, TrainConfig(model="score"), tmp_path / "x.pt", progress=False)
+
+
+def test_files_without_labels_are_refused(tmp_path):
+    from vgm_studio.matching.edges import Edge
+
+    path = tmp_path / "unlabelled.jsonl"
+    write_edges(path, [Edge("e", "x.log", "h", 0, 1, 0.0, 1.0, "loop", [0, 0, 0], [0, 0, 0])])
+    with pytest.raises(InputError, match="no edge labelled success or failure"):
+        read_labelled([Path(path)], progress=False)

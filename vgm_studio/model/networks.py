@@ -1,0 +1,158 @@
+"""The networks: the paper's VGM-Net, our sparse-aware VGM-Net, and the RGB-plot baseline."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import torch
+from torch import nn
+
+
+def _block(c_in: int, c_out: int, stride: int = 2) -> nn.Sequential:
+    return nn.Sequential(
+        nn.Conv2d(c_in, c_out, 3, stride=stride, padding=1, bias=False),
+        nn.BatchNorm2d(c_out),
+        nn.ReLU(inplace=True),
+    )
+
+
+class _PooledHead(nn.Module):
+    """Global average and max pooling, then an MLP to one logit (the sigmoid is in the loss).
+
+    ``extra`` scalars (the matcher's figures) join the pooled features when given.
+    """
+
+    def __init__(self, channels: int, hidden: int, dropout: float, extra: int = 0) -> None:
+        super().__init__()
+        self.mlp = nn.Sequential(
+            nn.Linear(2 * channels + extra, hidden),
+            nn.ReLU(inplace=True),
+            nn.Dropout(dropout),
+            nn.Linear(hidden, 1),
+        )
+
+    def forward(self, x: torch.Tensor, extra: torch.Tensor | None = None) -> torch.Tensor:
+        parts = [x.mean(dim=(2, 3)), x.amax(dim=(2, 3))]
+        if extra is not None:
+            parts.append(extra)
+        return self.mlp(torch.cat(parts, dim=1)).squeeze(1)
+
+
+@dataclass(frozen=True)
+class PaperConfig:
+    """VGM-Net as the paper's Table 1 gives it; what the paper leaves open is our choice:
+    3×3 convolutions with stride 2, batch norm and ReLU after each, global average+max pooling
+    before the 256-unit MLP, dropout 0.3."""
+
+    pointwise: int = 16
+    channels: tuple[int, ...] = (32, 64, 128, 128)
+    hidden: int = 256
+    dropout: float = 0.3
+
+
+class VGMNetPaper(nn.Module):
+    """The paper's network: a 1×1 convolution over the two VGM channels, four convolutions
+    of 32, 64, 128, 128 filters, a 256-unit MLP and a sigmoid output. Dense over 400×400."""
+
+    def __init__(self, config: PaperConfig | None = None) -> None:
+        super().__init__()
+        c = config or PaperConfig()
+        layers: list[nn.Module] = [nn.Conv2d(2, c.pointwise, 1), nn.ReLU(inplace=True)]
+        prev = c.pointwise
+        for ch in c.channels:
+            layers.append(_block(prev, ch))
+            prev = ch
+        self.features = nn.Sequential(*layers)
+        self.head = _PooledHead(prev, c.hidden, c.dropout)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.head(self.features(x))
+
+
+@dataclass(frozen=True)
+class SparseConfig:
+    """Our VGM-Net. The VGM is >99% empty; rather than convolve 160,000 mostly-zero cells,
+    fold each ``fold``×``fold`` block of cells into channels first (space-to-depth: lossless,
+    every cell's two values are still there), mix them with a 1×1 convolution, then run a
+    small strided CNN on the 16× smaller grid."""
+
+    fold: int = 4
+    pointwise: int = 24
+    channels: tuple[int, ...] = (32, 64, 64)
+    hidden: int = 128
+    dropout: float = 0.3
+    figures: bool = False
+
+
+class VGMNet(nn.Module):
+    """Space-to-depth VGM-Net: ~15× fewer multiply-adds than the paper's network."""
+
+    def __init__(self, config: SparseConfig | None = None) -> None:
+        super().__init__()
+        c = config or SparseConfig()
+        self.fold = nn.PixelUnshuffle(c.fold)
+        layers: list[nn.Module] = [
+            nn.Conv2d(2 * c.fold * c.fold, c.pointwise, 1, bias=False),
+            nn.BatchNorm2d(c.pointwise),
+            nn.ReLU(inplace=True),
+        ]
+        prev = c.pointwise
+        for ch in c.channels:
+            layers.append(_block(prev, ch))
+            prev = ch
+        self.features = nn.Sequential(*layers)
+        self.head = _PooledHead(prev, c.hidden, c.dropout, extra=2 if c.figures else 0)
+
+    def forward(self, x: torch.Tensor, extra: torch.Tensor | None = None) -> torch.Tensor:
+        """Takes (B, 2, S, S) VGMs, or the same already folded to (B, 2·f², S/f, S/f), and,
+        when built with ``figures``, (B, 2) matcher figures."""
+        if x.shape[1] == 2:
+            x = self.fold(x)
+        return self.head(self.features(x), extra)
+
+
+@dataclass(frozen=True)
+class RGBConfig:
+    """The baseline's CNN, of the paper network's size: four stride-2 convolutions of 32, 64,
+    128, 128 filters over the 3×200×200 plot, a 256-unit MLP."""
+
+    image: int = 200
+    channels: tuple[int, ...] = (32, 64, 128, 128)
+    hidden: int = 256
+    dropout: float = 0.3
+
+
+class RGBNet(nn.Module):
+    """CNN over an RGB plot of the matched pair (Jeong and Lee's validation baseline)."""
+
+    def __init__(self, config: RGBConfig | None = None) -> None:
+        super().__init__()
+        c = config or RGBConfig()
+        layers: list[nn.Module] = []
+        prev = 3
+        for ch in c.channels:
+            layers.append(_block(prev, ch))
+            prev = ch
+        self.features = nn.Sequential(*layers)
+        self.head = _PooledHead(prev, c.hidden, c.dropout)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.head(self.features(x))
+
+
+NETWORKS: dict[str, tuple[type[nn.Module], type]] = {
+    "vgmnet-paper": (VGMNetPaper, PaperConfig),
+    "vgmnet": (VGMNet, SparseConfig),
+    "rgb-baseline": (RGBNet, RGBConfig),
+}
+
+
+def build_network(name: str, hyper: dict[str, Any] | None = None) -> tuple[nn.Module, dict]:
+    """Builds a network by name; returns it and its hyper-parameters as a plain dict."""
+    cls, config_cls = NETWORKS[name]
+    hyper = dict(hyper or {})
+    if "channels" in hyper:
+        hyper["channels"] = tuple(hyper["channels"])
+    config = config_cls(**hyper)
+    return cls(config), asdict(config)

@@ -1,0 +1,156 @@
+"""The model API for the app and the back end: load once, predict p(success) for many edges."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+from torch import nn
+
+from vgm_studio.matching.edge_scans import EdgeScans
+from vgm_studio.matching.edges import Edge
+from vgm_studio.model.checkpoint import load_checkpoint
+from vgm_studio.model.features import (
+    PairSample,
+    figures_matrix,
+    load_samples,
+    rgb_batch,
+    vgm_batch,
+)
+from vgm_studio.model.networks import build_network
+from vgm_studio.model.score import ScoreModel
+from vgm_studio.vgm.grid import VGMParams
+
+
+def pick_device(device: str) -> torch.device:
+    """``auto`` takes CUDA when there is one."""
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if device == "cuda" and not torch.cuda.is_available():
+        raise ValueError("--device cuda asked for, but torch sees no CUDA device")
+    return torch.device(device)
+
+
+@dataclass
+class InputSpec:
+    """How a model's input batch is made from samples."""
+
+    kind: str  # "vgm", "rgb" or "figures"
+    vgm: VGMParams
+    fold: int = 1
+    image: int = 200
+    figures: bool = False
+
+    def batch(
+        self,
+        samples: Sequence[PairSample],
+        rotations: Sequence[float] | NDArray[np.float64] | None = None,
+    ) -> NDArray[Any]:
+        if self.kind == "vgm":
+            return vgm_batch(samples, self.vgm, rotations, fold=self.fold)
+        if self.kind == "rgb":
+            return rgb_batch(samples, self.image, rotations)
+        return figures_matrix(samples)
+
+    def tensors(
+        self,
+        samples: Sequence[PairSample],
+        device: torch.device,
+        rotations: Sequence[float] | NDArray[np.float64] | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """The network's inputs: the image batch (channels-last) and the figures, if used."""
+        x = torch.from_numpy(self.batch(samples, rotations)).to(device)
+        x = x.contiguous(memory_format=torch.channels_last)
+        extra = None
+        if self.figures:
+            extra = torch.from_numpy(figures_matrix(samples).astype(np.float32)).to(device)
+        return x, extra
+
+
+def input_spec(model: str, hyper: dict[str, Any], vgm: VGMParams) -> InputSpec:
+    if model == "score":
+        return InputSpec("figures", vgm)
+    if model == "rgb-baseline":
+        return InputSpec("rgb", vgm, image=int(hyper.get("image", 200)))
+    return InputSpec(
+        "vgm", vgm, fold=int(hyper.get("fold", 1)), figures=bool(hyper.get("figures", False))
+    )
+
+
+class Validator:
+    """A trained model that says p(success) for matched scan pairs.
+
+    Example:
+        >>> validator = Validator.load("assets/models/vgmnet-default.pt")
+        >>> p = validator.predict(edges)          # one p(success) per edge
+    """
+
+    def __init__(
+        self, checkpoint: dict[str, Any], device: str = "auto", path: Path | None = None
+    ) -> None:
+        self.checkpoint = checkpoint
+        self.path = path
+        self.name: str = checkpoint["model"]
+        self.vgm = VGMParams(**checkpoint["vgm"])
+        self.hyper: dict[str, Any] = checkpoint.get("hyper", {})
+        self.spec = input_spec(self.name, self.hyper, self.vgm)
+        self.threshold = float(checkpoint.get("threshold", 0.5))
+        self.device = pick_device(device)
+        self.network: nn.Module | None = None
+        self.score: ScoreModel | None = None
+        if self.name == "score":
+            self.score = ScoreModel(**checkpoint["score"])
+        else:
+            net, _ = build_network(self.name, self.hyper)
+            net.load_state_dict(checkpoint["state_dict"])
+            net.eval()
+            self.network = net.to(self.device).to(memory_format=torch.channels_last)  # type: ignore[call-overload]
+
+    @classmethod
+    def load(
+        cls, path: str | Path, device: str = "auto", expect_vgm: VGMParams | None = None
+    ) -> Validator:
+        """Loads a checkpoint; ``expect_vgm`` refuses one trained on other VGM parameters."""
+        path = Path(path)
+        return cls(load_checkpoint(path, expect_vgm), device, path)
+
+    @property
+    def metrics(self) -> dict[str, Any]:
+        """The validation metrics recorded at training time."""
+        return dict(self.checkpoint.get("metrics", {}))
+
+    def predict_samples(
+        self, samples: Sequence[PairSample], batch_size: int = 64
+    ) -> NDArray[np.float64]:
+        """p(success) for each sample, computed in batches."""
+        if self.score is not None:
+            return self.score.predict(figures_matrix(samples))
+        assert self.network is not None
+        out = np.empty(len(samples), dtype=np.float64)
+        with torch.inference_mode():
+            for start in range(0, len(samples), batch_size):
+                chunk = samples[start : start + batch_size]
+                x, extra = self.spec.tensors(chunk, self.device)
+                logits = self.network(x, extra) if extra is not None else self.network(x)
+                out[start : start + len(chunk)] = torch.sigmoid(logits).cpu().numpy()
+        return out
+
+    def decide(self, probabilities: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """True (keep the edge) where p(success) reaches the checkpoint's threshold."""
+        return np.asarray(probabilities) >= self.threshold
+
+    def predict(
+        self,
+        edges: Sequence[Edge],
+        scans: EdgeScans | None = None,
+        batch_size: int = 64,
+        progress: bool = False,
+    ) -> NDArray[np.float64]:
+        """p(success) for each edge; the edges' logs are read once through ``scans``."""
+        samples = load_samples(edges, scans, progress=progress)
+        return self.predict_samples(samples, batch_size)
