@@ -186,3 +186,26 @@ def test_every_shared_log_reads(datasets):
         log = open_log(path)
         assert len(log) > 100, path
         assert log.skipped_lines == 0, path
+
+
+@pytest.mark.parametrize("bad", ["inf", "nan", "-1", "-inf"])
+@pytest.mark.parametrize("kind", ["FLASER", "ROBOTLASER1"])
+def test_non_finite_or_negative_ranges_name_the_line(tmp_path, bad, kind):
+    if kind == "FLASER":
+        line = f"FLASER 3 1 {bad} 1 0 0 0 0 0 0 5 h 5"
+    else:
+        line = format_robotlaser(
+            [1.0, 2.0, 3.0],
+            angle_min=-1,
+            angle_increment=1,
+            max_range=30,
+            laser_pose=(0, 0, 0),
+            timestamp=5.0,
+        ).replace(" 2.000 ", f" {bad} ", 1)
+    good = flaser([1, 1, 1], (0, 0, 0), (0, 0, 0), 6)
+    path = write(tmp_path, [good, line, good])
+    with pytest.raises(InputError, match=rf"test.log:2: {kind}: range 2 .*finite distance") as exc:
+        open_log(path)
+    assert exc.value.line == 2
+    skipped = open_log(path, ReadOptions(skip_bad_lines=True))
+    assert len(skipped.scans) == 2 and skipped.skipped_line_numbers == [2]

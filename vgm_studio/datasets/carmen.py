@@ -115,8 +115,24 @@ class _LineParser:
                 self.number(i)
             raise
 
+    def ranges(self, start: int, stop: int) -> NDArray[np.float32]:
+        """The readings ``start:stop``; each must be a finite distance, ≥ 0."""
+        values = self.numbers(start, stop)
+        bad = np.flatnonzero(~np.isfinite(values) | (values < 0))
+        if len(bad):
+            k = int(bad[0])
+            raise self.fail(
+                f"range {k + 1} (field {start + k}) is {self.tokens[start + k]!r}; "
+                "a reading must be a finite distance ≥ 0"
+                + (f" ({len(bad)} such readings)" if len(bad) > 1 else "")
+            )
+        return values.astype(np.float32)
+
     def pose(self, start: int) -> NDArray[np.float64]:
-        return np.array([self.number(start + k) for k in range(3)])
+        pose = np.array([self.number(start + k) for k in range(3)])
+        if not np.all(np.isfinite(pose)):
+            raise self.fail(f"pose (fields {start}..{start + 2}) is not finite")
+        return pose
 
     def timestamp(self, i: int) -> float:
         return self.number(i) if i < len(self.tokens) else float("nan")
@@ -128,7 +144,7 @@ def _parse_flaser(p: _LineParser) -> _RawScan:
     return _RawScan(
         line=p.lineno,
         timestamp=p.timestamp(2 + n + 6),
-        ranges=p.numbers(2, 2 + n).astype(np.float32),
+        ranges=p.ranges(2, 2 + n),
         angle_min=None,
         angle_increment=None,
         max_range=None,
@@ -140,6 +156,8 @@ def _parse_flaser(p: _LineParser) -> _RawScan:
 def _parse_robotlaser(p: _LineParser) -> _RawScan:
     p.need(9, "laser configuration")
     start, _fov, res, max_range = (p.number(i) for i in (2, 3, 4, 5))
+    if not (math.isfinite(max_range) and max_range > 0):
+        raise p.fail(f"maximum range (field 5) must be a positive distance, got {max_range}")
     n = p.count(8)
     p.need(9 + n + 1, f"{n} ranges and the remission count")
     m = p.count(9 + n)
@@ -148,7 +166,7 @@ def _parse_robotlaser(p: _LineParser) -> _RawScan:
     return _RawScan(
         line=p.lineno,
         timestamp=p.timestamp(tail + 11),
-        ranges=p.numbers(9, 9 + n).astype(np.float32),
+        ranges=p.ranges(9, 9 + n),
         angle_min=start,
         angle_increment=res,
         max_range=max_range,
@@ -205,7 +223,7 @@ def read_carmen(path: str | Path, options: ReadOptions | None = None) -> ScanLog
     raw: list[_RawScan] = []
     truepos: list[tuple[float, NDArray[np.float64]]] = []
     last_odom: NDArray[np.float64] | None = None
-    bad = 0
+    bad: list[int] = []
     try:
         lines: Iterable[str] = path.open("r", encoding="utf-8", errors="strict").readlines()
     except UnicodeDecodeError as exc:
@@ -235,7 +253,7 @@ def read_carmen(path: str | Path, options: ReadOptions | None = None) -> ScanLog
         except InputError:
             if not options.skip_bad_lines:
                 raise
-            bad += 1
+            bad.append(lineno)
     if not raw:
         found = ", ".join(f"{k} ×{v}" for k, v in counts.most_common(5)) or "nothing"
         raise InputError(path, f"no {scan_type}/ROBOTLASER1 scans in this log (found {found})")
@@ -298,7 +316,8 @@ def read_carmen(path: str | Path, options: ReadOptions | None = None) -> ScanLog
             if source == "reference"
             else None
         ),
-        skipped_lines=bad,
+        skipped_lines=len(bad),
+        skipped_line_numbers=bad,
         ignored_messages=dict(ignored),
         message_counts=dict(counts),
     )

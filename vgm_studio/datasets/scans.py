@@ -65,6 +65,8 @@ class ScanLog:
         pose_source: What the scan messages' pose fields hold.
         reference_origin: Where reference poses come from (``pose fields``, ``TRUEPOS``, or a
             reference log's path), None without any.
+        skipped_lines: How many malformed lines ``skip_bad_lines`` read past.
+        skipped_line_numbers: Their line numbers, in file order.
     """
 
     path: Path
@@ -74,6 +76,7 @@ class ScanLog:
     pose_source: PoseSource | None = None
     reference_origin: str | None = None
     skipped_lines: int = 0
+    skipped_line_numbers: list[int] = field(default_factory=list)
     ignored_messages: dict[str, int] = field(default_factory=dict)
     message_counts: dict[str, int] = field(default_factory=dict)
 
