@@ -99,3 +99,16 @@ def test_too_few_points_returns_guess(office):
     result = ScanMatcher().match(empty, office.scans[1], np.array([0.1, 0.0, 0.0]))
     np.testing.assert_allclose(result.estimate, [0.1, 0.0, 0.0])
     assert result.inlier_ratio == 0.0 and not result.converged
+
+
+def test_kiss_moved_reports_how_far_kiss_icp_moved_the_guess(office):
+    rng = np.random.default_rng(2)
+    a, b, _, guess = next(perturbed_pairs(office, 1, rng, max_xy=0.2))
+    fig = ScanMatcher().match(office.scans[a], office.scans[b], guess).figures()
+    step = se2.between(guess, fig["kiss_estimate"])
+    assert fig["kiss_moved"] == pytest.approx(float(np.hypot(step[0], step[1])))
+    assert fig["kiss_turned"] == pytest.approx(abs(float(step[2])))
+    # The guess was off, so kiss-icp had to move it.
+    assert fig["kiss_moved"] > 0.005
+    # Existing keys keep their names.
+    assert {"iterations", "converged", "inlier_ratio", "residual", "covariance"} <= set(fig)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
@@ -126,7 +127,17 @@ def plan_pairs(
     refs = [s.reference for s in log.scans]
     pairs: list[_Pair] = []
     if config.sequential:
-        keys = select_keyframes(odometry, config.keyframe_distance, config.keyframe_angle_deg)
+        has_ref = np.array([r is not None for r in refs])
+        pool = np.arange(len(refs))
+        if 2 <= has_ref.sum() < len(refs):
+            # A reference that covers only some scans (GMapping keeps one scan in ~15) makes
+            # those scans the keyframes; otherwise nearly every sequential edge would join a
+            # scan without a reference and come out unlabelled.
+            pool = np.flatnonzero(has_ref)
+            notes["keyframes_from"] = "scans with a reference pose"
+        keys = pool[
+            select_keyframes(odometry[pool], config.keyframe_distance, config.keyframe_angle_deg)
+        ]
         notes["keyframes"] = len(keys)
         for a, b in itertools.pairwise(keys):
             ra, rb = refs[a], refs[b]
@@ -202,6 +213,8 @@ def make_candidates(
         "matcher": asdict(matcher.config),
         **notes,
     }
+    # Absolute, so the edges file still finds its log when read from another folder.
+    log_path = str(Path(log.path).resolve())
     edges = []
     for p in tqdm(pairs, desc="matching", unit="edge", disable=None if progress else True):
         result = matcher.match(log.scans[p.a], log.scans[p.b], p.guess)
@@ -212,7 +225,7 @@ def make_candidates(
         edges.append(
             Edge(
                 edge_id=edge_id(log.content_hash, p.a, p.b, estimate),
-                log_path=str(log.path),
+                log_path=log_path,
                 log_sha256=log.content_hash,
                 a=p.a,
                 b=p.b,

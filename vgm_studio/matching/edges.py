@@ -170,20 +170,27 @@ def write_edges(path: str | Path, edges: Iterable[Edge]) -> int:
 def read_edges(path: str | Path) -> list[Edge]:
     """Reads a JSONL edge file; a malformed line raises ``InputError`` with its line number."""
     path = Path(path)
+    if path.is_dir():
+        raise InputError(path, "is a folder, not an edges file")
     if not path.is_file():
         raise InputError(path, "no such file")
     edges = []
-    with path.open(encoding="utf-8") as f:
-        for lineno, text in enumerate(f, start=1):
-            if not text.strip():
-                continue
-            try:
-                obj = json.loads(text)
-            except json.JSONDecodeError as exc:
-                raise InputError(
-                    path, f"not JSON ({exc.msg} at column {exc.colno})", line=lineno
-                ) from None
-            edges.append(Edge.from_json(obj, path, lineno))
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except UnicodeDecodeError as exc:
+        raise InputError(
+            path, f"not a text edges file ({exc.reason} at byte {exc.start})"
+        ) from None
+    for lineno, text in enumerate(lines, start=1):
+        if not text.strip():
+            continue
+        try:
+            obj = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise InputError(
+                path, f"not JSON ({exc.msg} at column {exc.colno})", line=lineno
+            ) from None
+        edges.append(Edge.from_json(obj, path, lineno))
     if not edges:
         raise InputError(path, "holds no edges")
     return edges

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -9,6 +10,7 @@ import numpy as np
 from kiss_icp.mapping import VoxelHashMap
 from numpy.typing import NDArray
 
+from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.refinement import Target, refine
@@ -22,11 +24,17 @@ class MatchResult:
     Attributes:
         estimate: (x, y, θ) of scan b in the frame of scan a.
         iterations: Refinement iterations (0 when refinement is off or impossible).
-        converged: The refinement converged.
+        converged: The refinement's steps shrank below its tolerance before the iteration
+            limit. It says the optimiser settled, not that the match is right: a match can
+            converge onto a wrong alignment, so read it with ``inlier_ratio`` and
+            ``kiss_moved``.
         inlier_ratio: Share of scan b's points that agree with scan a after the match.
         residual: RMS point-to-line residual of the inliers, metres.
         covariance: 3×3 covariance of the estimate, None where not available.
         kiss_estimate: kiss-icp's own estimate before refinement.
+        kiss_moved: How far kiss-icp moved scan b from the guess, metres. Zero means kiss-icp
+            returned the guess unchanged (it found too few correspondences to act on).
+        kiss_turned: How far kiss-icp turned scan b from the guess, radians (absolute).
     """
 
     estimate: NDArray[np.float64]
@@ -36,6 +44,8 @@ class MatchResult:
     residual: float
     covariance: NDArray[np.float64] | None
     kiss_estimate: NDArray[np.float64]
+    kiss_moved: float = 0.0
+    kiss_turned: float = 0.0
 
     def figures(self) -> dict[str, Any]:
         """The quality figures as JSON-ready values."""
@@ -93,6 +103,8 @@ class ScanMatcher:
         if pa.voxel_map is None or pa.target is None or len(pb.points) < 3:
             return MatchResult(guess, 0, False, 0.0, float("inf"), None, guess)
         kiss = self._kiss.align(pb.points, pa.voxel_map, guess)
+        step = se2.between(guess, kiss)
+        moved, turned = float(math.hypot(step[0], step[1])), float(abs(step[2]))
         if not self.config.refine:
             r = refine(
                 pa.target,
@@ -102,7 +114,7 @@ class ScanMatcher:
                 max_distance=self.config.refine_distance,
                 inlier_distance=self.config.inlier_distance,
             )
-            return MatchResult(kiss, 0, True, r.inlier_ratio, r.residual, None, kiss)
+            return MatchResult(kiss, 0, True, r.inlier_ratio, r.residual, None, kiss, moved, turned)
         r = refine(
             pa.target,
             pb.points,
@@ -113,5 +125,13 @@ class ScanMatcher:
             degeneracy=self.config.degeneracy,
         )
         return MatchResult(
-            r.estimate, r.iterations, r.converged, r.inlier_ratio, r.residual, r.covariance, kiss
+            r.estimate,
+            r.iterations,
+            r.converged,
+            r.inlier_ratio,
+            r.residual,
+            r.covariance,
+            kiss,
+            moved,
+            turned,
         )
