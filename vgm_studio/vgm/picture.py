@@ -17,19 +17,32 @@ from vgm_studio.vgm.render import Caption, draw_pair
 
 
 def edge_caption(edge: Edge, use_guess: bool) -> Caption:
-    """Edge id, scans, kind, label and the matcher's figures, one line each."""
+    """A headline (label, inlier ratio) and the edge's figures and error vs reference below it.
+
+    The error is of the pose drawn: the initial guess's with ``use_guess``, else the
+    estimate's, so the header always describes the picture under it.
+    """
     m = edge.match
+    inliers = m.get("inlier_ratio")
+    inlier_text = f"{100 * inliers:.0f}%" if isinstance(inliers, (int, float)) else "?"
+    drawn = "initial guess" if use_guess else "match estimate"
+    headline = f"{(edge.label or 'unlabelled').upper()}   inliers {inlier_text}"
     lines = [
-        f"edge {edge.edge_id}  {edge.kind}  scans {edge.a} -> {edge.b}  "
-        f"({'initial guess' if use_guess else 'match estimate'})",
-        f"label: {edge.label or 'unlabelled'}   inliers {m.get('inlier_ratio', float('nan')):.2f}"
-        f"   residual {1000 * (m.get('residual') or float('nan')):.1f} mm"
-        f"   iterations {m.get('iterations', '?')}",
+        f"edge {edge.edge_id}  {edge.kind}  scans {edge.a} -> {edge.b}  (drawn: {drawn})",
+        f"residual {1000 * (m.get('residual') or float('nan')):.1f} mm"
+        f"   iterations {m.get('iterations', '?')}   converged {m.get('converged', '?')}"
+        + (
+            f"   kiss-icp moved {100 * m['kiss_moved']:.1f} cm"
+            if isinstance(m.get("kiss_moved"), (int, float))
+            else ""
+        ),
     ]
     if edge.reference is not None:
-        exy, eth = se2.pose_error(edge.reference, edge.estimate)
-        lines.append(f"error vs reference: {100 * exy:.1f} cm, {math.degrees(eth):.2f} deg")
-    return Caption(tuple(lines))
+        pose = edge.guess if use_guess else edge.estimate
+        exy, eth = se2.pose_error(edge.reference, pose)
+        error = f"{100 * exy:.1f} cm, {math.degrees(eth):.2f} deg"
+        lines.append(f"{drawn} vs reference: {error}")
+    return Caption(tuple(lines), headline=headline)
 
 
 def edge_picture(
@@ -48,8 +61,15 @@ def edge_picture(
     pose = np.asarray(edge.guess if use_guess else edge.estimate, dtype=np.float64)
     prev_pts, cur_pts = a.points(), b.points()
     vgm = pair_map(prev_pts, cur_pts, pose, size=size, resolution=resolution, sigma=sigma)
+    ghost = None if edge.reference is None else np.asarray(edge.reference, dtype=np.float64)
     img = draw_pair(
-        vgm, prev_pts, cur_pts, pose, resolution=resolution, caption=edge_caption(edge, use_guess)
+        vgm,
+        prev_pts,
+        cur_pts,
+        pose,
+        resolution=resolution,
+        caption=edge_caption(edge, use_guess),
+        ghost_pose=ghost,
     )
     png.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(png), img):

@@ -14,7 +14,13 @@ from vgm_studio.core import se2
 # BGR colours: previous scan blue-cyan, current scan orange, as in most scan-matching viewers.
 PREV_BGR = np.array([255, 170, 40], dtype=np.float32)
 CUR_BGR = np.array([30, 140, 255], dtype=np.float32)
+# The current scan placed by the reference pose: where it should be, drawn faint under the rest.
+GHOST_BGR = np.array([120, 120, 120], dtype=np.float32)
 BACKGROUND = 18
+# Every occupied VGM cell is drawn at least this bright (share of its channel colour): a cell's
+# value scales with its hit count over the grid's largest, so most cells of a scan sit far below
+# 0.1 and vanished into the black background.
+MIN_CELL_BRIGHTNESS = 0.5
 
 
 @dataclass(frozen=True)
@@ -22,15 +28,24 @@ class Caption:
     """Text lines drawn above the picture."""
 
     lines: tuple[str, ...]
+    # Drawn larger, first: the figure a reviewer reads first (inlier ratio and label).
+    headline: str | None = None
 
 
 def heatmap(vgm: NDArray[np.float32], gamma: float = 0.5) -> NDArray[np.uint8]:
     """Colours a (2, H, W) VGM: channel 0 in the previous scan's colour, 1 in the current's.
 
-    Rows run along +y, so the image is flipped to show +y up. ``gamma`` < 1 lifts faint cells.
+    Rows run along +y, so the image is flipped to show +y up. ``gamma`` < 1 lifts faint cells,
+    and every occupied cell is drawn at least ``MIN_CELL_BRIGHTNESS`` bright; empty cells stay
+    background. The colour is scaled to 85% so scan points drawn on top stand out.
     """
-    c0 = np.clip(vgm[0], 0, 1) ** gamma
-    c1 = np.clip(vgm[1], 0, 1) ** gamma
+
+    def lift(channel: NDArray[np.float32]) -> NDArray[np.float32]:
+        v = np.clip(channel, 0, 1) ** gamma
+        lifted = MIN_CELL_BRIGHTNESS + (1 - MIN_CELL_BRIGHTNESS) * v
+        return np.where(channel > 0, 0.85 * lifted, 0.0).astype(np.float32)
+
+    c0, c1 = lift(vgm[0]), lift(vgm[1])
     img = BACKGROUND + c0[..., None] * PREV_BGR + c1[..., None] * CUR_BGR
     return np.ascontiguousarray(np.clip(img, 0, 255).astype(np.uint8)[::-1])
 
@@ -44,6 +59,7 @@ def draw_pair(
     resolution: float,
     width: int = 800,
     caption: Caption | None = None,
+    ghost_pose: NDArray[np.float64] | None = None,
 ) -> NDArray[np.uint8]:
     """Draws the VGM heatmap, both scans' points and both sensor poses, as a BGR image.
 
@@ -58,13 +74,21 @@ def draw_pair(
         resolution: VGM cell edge, metres.
         width: Picture width in pixels, roughly.
         caption: Text lines above the picture.
+        ghost_pose: The reference pose of the current scan; when given, the current scan is
+            also drawn there, faint grey, so a wrong match shows where it should have landed.
     """
     size = vgm.shape[-1]
     half = 0.5 * size * resolution
     moved = se2.transform_points(estimate, cur_points)
-    i0, i1, j0, j1 = _view(
-        np.vstack([prev_points, moved, [[0.0, 0.0], estimate[:2]]]), size, resolution
-    )
+    ghost = None if ghost_pose is None else se2.transform_points(ghost_pose, cur_points)
+    extent: list[NDArray[np.float64]] = [
+        prev_points,
+        moved,
+        np.array([[0.0, 0.0], estimate[:2]], dtype=np.float64),
+    ]
+    if ghost is not None and ghost_pose is not None:
+        extent += [ghost, np.asarray(ghost_pose[:2], dtype=np.float64).reshape(1, 2)]
+    i0, i1, j0, j1 = _view(np.vstack(extent), size, resolution)
     scale = max(2, width // (j1 - j0))
     crop = heatmap(vgm[:, i0:i1, j0:j1])
     img: NDArray[np.uint8] = np.asarray(
@@ -82,18 +106,45 @@ def draw_pair(
         v = (y1 - pts[:, 1]) * px_per_m
         return np.round(np.column_stack([u, v])).astype(np.int32)
 
-    radius = max(1, scale // 4)
+    # At two or three pixels a cell, a point drawn as a disc would hide its own cell: draw it
+    # as one pixel so the VGM cell around it (the thing the model sees) stays visible.
+    radius = 0 if scale < 4 else max(1, scale // 4)
+    if ghost is not None and ghost_pose is not None:
+        # Only on empty background, so it never hides the VGM or the scans it is compared with.
+        empty = np.all(img == BACKGROUND, axis=2)
+        layer = img.copy()
+        _draw_points(layer, to_px(ghost), GHOST_BGR, max(radius, 1), hollow=True)
+        img[empty] = layer[empty]
+        _draw_pose(img, np.asarray(ghost_pose), to_px, px_per_m, _bgr(GHOST_BGR))
     for pts, colour in ((prev_points, PREV_BGR), (moved, CUR_BGR)):
-        for u, v in to_px(pts):
-            cv2.circle(
-                img, (int(u), int(v)), radius, tuple(int(c) for c in colour), -1, cv2.LINE_AA
-            )
+        _draw_points(img, to_px(pts), colour, radius)
     for pose, colour in ((np.zeros(3), PREV_BGR), (np.asarray(estimate), CUR_BGR)):
         _draw_pose(img, pose, to_px, px_per_m, tuple(int(c) for c in colour))
     _draw_scale_bar(img, px_per_m)
     if caption is not None:
-        img = _add_caption(img, caption)
+        img = _add_caption(img, caption, ghost=ghost is not None)
     return img
+
+
+def _bgr(colour: NDArray[np.float32]) -> tuple[int, ...]:
+    return tuple(int(c) for c in colour)
+
+
+def _draw_points(
+    img: NDArray[np.uint8],
+    px: NDArray[np.int32],
+    colour: NDArray[np.float32],
+    radius: int,
+    hollow: bool = False,
+) -> None:
+    """Discs of ``radius`` (rings when ``hollow``), or single pixels at radius 0."""
+    if radius == 0:
+        h, w = img.shape[:2]
+        inside = (px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)
+        img[px[inside, 1], px[inside, 0]] = colour.astype(np.uint8)
+        return
+    for u, v in px:
+        cv2.circle(img, (int(u), int(v)), radius, _bgr(colour), 1 if hollow else -1, cv2.LINE_AA)
 
 
 def _view(points: NDArray[np.float64], size: int, resolution: float) -> tuple[int, int, int, int]:
@@ -143,24 +194,43 @@ def _draw_scale_bar(img: NDArray[np.uint8], px_per_m: float) -> None:
     )
 
 
-def _add_caption(img: NDArray[np.uint8], caption: Caption) -> NDArray[np.uint8]:
+def _add_caption(
+    img: NDArray[np.uint8], caption: Caption, ghost: bool = False
+) -> NDArray[np.uint8]:
     line_h = 22
-    bar = np.full((line_h * len(caption.lines) + 12, img.shape[1], 3), 40, dtype=np.uint8)
+    head_h = 34 if caption.headline else 0
+    legend = [("previous", PREV_BGR), ("current", CUR_BGR)]
+    if ghost:
+        legend.append(("reference", GHOST_BGR))
+    rows = max(len(caption.lines), len(legend))
+    bar = np.full((head_h + line_h * rows + 12, img.shape[1], 3), 40, dtype=np.uint8)
+    if caption.headline:
+        cv2.putText(
+            bar,
+            caption.headline,
+            (10, 28),
+            cv2.FONT_HERSHEY_SIMPLEX,
+            0.85,
+            (255, 255, 255),
+            2,
+            cv2.LINE_AA,
+        )
     for k, text in enumerate(caption.lines):
         cv2.putText(
             bar,
             text,
-            (10, 20 + k * line_h),
+            (10, head_h + 20 + k * line_h),
             cv2.FONT_HERSHEY_SIMPLEX,
             0.55,
             (235, 235, 235),
             1,
             cv2.LINE_AA,
         )
-    legend_y = 20
-    for text, colour in (("previous", PREV_BGR), ("current", CUR_BGR)):
+    legend_y = head_h + 20
+    for text, colour in legend:
         x = img.shape[1] - 120
-        cv2.circle(bar, (x, legend_y - 5), 6, tuple(int(c) for c in colour), -1, cv2.LINE_AA)
+        filled = -1 if colour is not GHOST_BGR else 2
+        cv2.circle(bar, (x, legend_y - 5), 6, _bgr(colour), filled, cv2.LINE_AA)
         cv2.putText(
             bar,
             text,
