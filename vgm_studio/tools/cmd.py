@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
+import math
+import os
 import sys
+import tempfile
 import time
 from collections import Counter
 from dataclasses import asdict
@@ -40,19 +43,91 @@ class Laser(str, Enum):
     rear = "rear"
 
 
-LogArg = Annotated[Path, typer.Argument(help="CARMEN log, ROS 1 .bag or ROS 2 bag folder.")]
+def _number(
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    lo_open: bool = False,
+    optional: bool = False,
+) -> Any:
+    """A typer callback: the value must be finite and within [lo, hi] ((lo, hi] when lo_open).
+
+    click's own ranges let ``nan`` and ``inf`` through (nan compares false with every bound),
+    and a non-finite threshold quietly turns every comparison downstream into nonsense.
+    """
+
+    def check(value: Any) -> Any:
+        if value is None and optional:
+            return value
+        if not math.isfinite(value):
+            raise typer.BadParameter(f"{value} is not a finite number.")
+        if lo is not None and (value <= lo if lo_open else value < lo):
+            sign = ">" if lo_open else "≥"
+            raise typer.BadParameter(f"{value:g} is out of range: it must be {sign} {lo:g}.")
+        if hi is not None and value > hi:
+            raise typer.BadParameter(f"{value:g} is out of range: it must be ≤ {hi:g}.")
+        return value
+
+    return check
+
+
+def _writable_file(path: Path) -> None:
+    """Fails now, before minutes of work, if ``path`` cannot be written.
+
+    Raises:
+        InputError: ``path`` is a folder, or its folder cannot be made or written.
+    """
+    if path.is_dir():
+        raise InputError(path, "is a folder; give a file name to write")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise InputError(path, f"cannot write here ({exc.strerror or exc})") from None
+
+
+def _writable_folder(path: Path) -> None:
+    """Fails now if ``path`` cannot be a folder to write files into.
+
+    Raises:
+        InputError: ``path`` is a file, or cannot be made or written.
+    """
+    if path.exists() and not path.is_dir():
+        raise InputError(path, "is a file, not a folder; --out takes a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".vgm-studio.", dir=path)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise InputError(path, f"cannot write here ({exc.strerror or exc})") from None
+
+
+LogArg = Annotated[
+    Path, typer.Argument(metavar="LOG", help="CARMEN log, ROS 1 .bag or ROS 2 bag folder.")
+]
 PosesOpt = Annotated[
     Poses,
     typer.Option(
         help="What the scans' pose fields hold (auto: GMapping output → reference, else odometry)."
     ),
 ]
-FovOpt = Annotated[float, typer.Option("--fov", help="FLASER field of view in degrees.")]
+FovOpt = Annotated[
+    float,
+    typer.Option(
+        "--fov",
+        help="FLASER field of view in degrees, in (0, 360].",
+        callback=_number(0, 360, lo_open=True),
+    ),
+]
 MaxRangeOpt = Annotated[
     float | None,
     typer.Option(
-        help="Readings at or beyond this (m) are no-returns "
-        "[default: the message's, or 95% of the log's largest reading]."
+        help="Readings at or beyond this (m, > 0) are no-returns.",
+        show_default="the message's, or 95% of the log's largest reading",
+        callback=_number(0, lo_open=True, optional=True),
     ),
 ]
 LaserOpt = Annotated[Laser, typer.Option(help="front: FLASER/ROBOTLASER1; rear: RLASER.")]
@@ -83,12 +158,21 @@ def _read_options(
 
 def _report_skipped(log: ScanLog) -> None:
     if log.skipped_lines:
-        typer.echo(f"{log.path}: skipped {log.skipped_lines} malformed line(s)", err=True)
+        lines = log.skipped_line_numbers
+        shown = ", ".join(map(str, lines[:5])) + (", …" if len(lines) > 5 else "")
+        where = f" (line{'s' if len(lines) > 1 else ''} {shown})" if lines else ""
+        typer.echo(f"{log.path}: skipped {log.skipped_lines} malformed line(s){where}", err=True)
 
 
 @app.command()
 def info(
-    log: LogArg,
+    log: Annotated[
+        Path,
+        typer.Argument(
+            metavar="LOG",
+            help="CARMEN log, ROS 1 .bag, ROS 2 bag folder, or Freiburg relations file.",
+        ),
+    ],
     poses: PosesOpt = Poses.auto,
     fov: FovOpt = 180.0,
     max_range: MaxRangeOpt = None,
@@ -105,10 +189,19 @@ def info(
     if log.is_file() and looks_like_relations(log):
         rel = read_relations(log)
         stamps = {r.t_a for r in rel} | {r.t_b for r in rel}
-        typer.echo(
-            f"{log}: Freiburg relations file, {len(rel)} relations "
-            f"between {len(stamps)} scan timestamps"
-        )
+        if as_json:
+            summary = {
+                "path": str(log),
+                "format": "relations",
+                "relations": len(rel),
+                "timestamps": len(stamps),
+            }
+            typer.echo(json.dumps(summary, indent=2))
+        else:
+            typer.echo(
+                f"{log}: Freiburg relations file, {len(rel)} relations "
+                f"between {len(stamps)} scan timestamps"
+            )
         return
     scan_log = open_log(
         log, _read_options(poses, fov, max_range, laser, skip_bad_lines, scan_topic, odom_topic)
@@ -118,24 +211,55 @@ def info(
     _report_skipped(scan_log)
 
 
+def _preset(value: Any) -> Any:
+    from vgm_studio.simulation.presets import preset_names
+
+    if value not in preset_names():
+        raise typer.BadParameter(f"{value!r} is not one of {', '.join(preset_names())}.")
+    return value
+
+
 @app.command()
 def simulate(
     out: Annotated[Path, typer.Option(help="Folder to write the log into.")],
-    seed: Annotated[int, typer.Option(help="Random seed; same seed, same bytes.")] = 0,
+    seed: Annotated[int, typer.Option(help="Random seed; same seed, same bytes.", min=0)] = 0,
     preset: Annotated[
         str,
         typer.Option(
-            help="World: corridor, l-junction, t-junction, loop, repetitive, office, demo."
+            help="World: corridor, l-junction, t-junction, loop, repetitive, office, demo.",
+            callback=_preset,
         ),
     ] = "office",
-    beams: Annotated[int, typer.Option(help="Beams per scan.")] = 361,
-    fov: Annotated[float, typer.Option("--fov", help="Field of view, degrees.")] = 180.0,
-    range_noise: Annotated[float, typer.Option(help="Range noise σ, metres.")] = 0.01,
-    max_range: Annotated[float, typer.Option(help="Sensor maximum range, metres.")] = 30.0,
-    people: Annotated[int, typer.Option(help="Moving people in the world.")] = 0,
-    scan_spacing: Annotated[float, typer.Option(help="Metres travelled between scans.")] = 0.1,
+    beams: Annotated[int, typer.Option(help="Beams per scan.", min=2)] = 361,
+    fov: Annotated[
+        float,
+        typer.Option(
+            "--fov",
+            help="Field of view, degrees, in (0, 360].",
+            callback=_number(0, 360, lo_open=True),
+        ),
+    ] = 180.0,
+    range_noise: Annotated[
+        float, typer.Option(help="Range noise σ, metres (≥ 0).", callback=_number(0))
+    ] = 0.01,
+    max_range: Annotated[
+        float,
+        typer.Option(help="Sensor maximum range, metres (> 0).", callback=_number(0, lo_open=True)),
+    ] = 30.0,
+    people: Annotated[int, typer.Option(help="Moving people in the world.", min=0)] = 0,
+    scan_spacing: Annotated[
+        float,
+        typer.Option(
+            help="Metres travelled between scans (> 0).", callback=_number(0, lo_open=True)
+        ),
+    ] = 0.1,
     laps: Annotated[
-        float | None, typer.Option(help="Laps of the route [default: the preset's].")
+        float | None,
+        typer.Option(
+            help="Laps of the route (> 0).",
+            show_default="the preset's",
+            callback=_number(0, lo_open=True, optional=True),
+        ),
     ] = None,
 ) -> None:
     """Write a simulated CARMEN log (TRUEPOS ground truth, noisy odometry) by ray casting."""
@@ -153,41 +277,71 @@ def simulate(
         scan_spacing=scan_spacing,
         laps=laps,
     )
+    _writable_folder(out)
     path = run(config, out)
     typer.echo(f"wrote {path}")
+
+
+def _positive(what: str) -> Any:
+    return typer.Option(help=what, callback=_number(0, lo_open=True))
+
+
+def _non_negative(what: str) -> Any:
+    return typer.Option(help=what, callback=_number(0))
 
 
 @app.command()
 def candidates(
     log: LogArg,
-    out: Annotated[Path, typer.Option(help="Edges JSONL file to write.")],
+    out: Annotated[Path, typer.Option(metavar="EDGES.jsonl", help="Edges JSONL file to write.")],
     reference: Annotated[
         Path | None,
         typer.Option(
-            help="Reference: a corrected log, a log with TRUEPOS, or a "
-            "Freiburg relations file [default: the log's own poses]."
+            metavar="REF",
+            help="Reference: a corrected log, a log with TRUEPOS, or a Freiburg relations file.",
+            show_default="the log's own poses",
         ),
     ] = None,
-    seed: Annotated[int, typer.Option(help="Seed for loop sampling and guess noise.")] = 0,
-    max_loops: Annotated[int, typer.Option("--max", help="Loop candidates at most.")] = 2000,
-    min_gap: Annotated[int, typer.Option(help="Loop pairs at least this many scans apart.")] = 50,
-    max_distance: Annotated[float, typer.Option(help="Loop pairs within this many metres.")] = 3.0,
-    max_angle: Annotated[float, typer.Option(help="Loop pairs within this many degrees.")] = 45.0,
-    noise_xy: Annotated[float, typer.Option(help="Guess noise σ in x and y, metres.")] = 0.3,
-    noise_theta: Annotated[float, typer.Option(help="Guess noise σ in θ, degrees.")] = 5.0,
+    seed: Annotated[int, typer.Option(help="Seed for loop sampling and guess noise.", min=0)] = 0,
+    max_loops: Annotated[int, typer.Option("--max", help="Loop candidates at most.", min=1)] = 2000,
+    min_gap: Annotated[
+        int, typer.Option(help="Loop pairs at least this many scans apart.", min=0)
+    ] = 50,
+    max_distance: Annotated[float, _positive("Loop pairs within this many metres (> 0).")] = 3.0,
+    max_angle: Annotated[
+        float,
+        typer.Option(
+            help="Loop pairs within this many degrees, in (0, 180].",
+            callback=_number(0, 180, lo_open=True),
+        ),
+    ] = 45.0,
+    noise_xy: Annotated[float, _non_negative("Guess noise σ in x and y, metres (≥ 0).")] = 0.3,
+    noise_theta: Annotated[float, _non_negative("Guess noise σ in θ, degrees (≥ 0).")] = 5.0,
     keyframe_distance: Annotated[
-        float, typer.Option(help="Keyframe every this many metres (0: every scan).")
+        float, _non_negative("Keyframe every this many metres (0: every scan).")
     ] = 0.0,
-    keyframe_angle: Annotated[float, typer.Option(help="…or this many degrees.")] = 0.0,
+    keyframe_angle: Annotated[float, _non_negative("…or this many degrees (0: off).")] = 0.0,
     sequential: Annotated[bool, typer.Option(help="Make sequential edges.")] = True,
     loops: Annotated[bool, typer.Option(help="Make loop edges.")] = True,
-    success_xy: Annotated[float, typer.Option(help="Success: |e_xy| ≤ this (m)…")] = 0.10,
-    success_theta: Annotated[float, typer.Option(help="…and |e_θ| ≤ this (deg).")] = 2.0,
-    failure_xy: Annotated[float, typer.Option(help="Failure: |e_xy| ≥ this (m)…")] = 0.30,
-    failure_theta: Annotated[float, typer.Option(help="…or |e_θ| ≥ this (deg).")] = 5.0,
+    success_xy: Annotated[float, _positive("Success: |e_xy| ≤ this (m)…")] = 0.10,
+    success_theta: Annotated[float, _positive("…and |e_θ| ≤ this (deg).")] = 2.0,
+    failure_xy: Annotated[float, _positive("Failure: |e_xy| ≥ this (m, > success)…")] = 0.30,
+    failure_theta: Annotated[float, _positive("…or |e_θ| ≥ this (deg, > success).")] = 5.0,
     time_tolerance: Annotated[
-        float, typer.Option(help="Reference timestamps match within this many seconds.")
+        float,
+        typer.Option(
+            help="Reference timestamps match within this many seconds, in (0, 10].",
+            callback=_number(0, 10, lo_open=True),
+        ),
     ] = 0.05,
+    time_offset: Annotated[
+        float,
+        typer.Option(
+            help="Seconds added to a reference log's timestamps before the join "
+            "(a GMapping log counts from the start of the run).",
+            callback=_number(),
+        ),
+    ] = 0.0,
     poses: PosesOpt = Poses.auto,
     fov: FovOpt = 180.0,
     max_range: MaxRangeOpt = None,
@@ -204,13 +358,28 @@ def candidates(
     from vgm_studio.matching.labels import LabelThresholds
     from vgm_studio.matching.matcher import ScanMatcher
 
+    if not sequential and not loops:
+        raise typer.BadParameter("--no-sequential and --no-loops leave no edges to make.")
+    if success_xy >= failure_xy:
+        raise typer.BadParameter(
+            f"--success-xy {success_xy:g} must be below --failure-xy {failure_xy:g}."
+        )
+    if success_theta >= failure_theta:
+        raise typer.BadParameter(
+            f"--success-theta {success_theta:g} must be below --failure-theta {failure_theta:g}."
+        )
+    if log.is_file() and looks_like_relations(log):
+        raise InputError(
+            log, "this is a Freiburg relations file; pass it as --reference, after the log"
+        )
+    _writable_file(out)
     options = _read_options(poses, fov, max_range, laser, skip_bad_lines, scan_topic, odom_topic)
     scan_log = open_log(log, options)
     _report_skipped(scan_log)
     params: dict[str, Any] = {"read": asdict(options), "reference_source": "log"}
     matched = None
     if reference is not None:
-        params["reference_source"] = str(reference)
+        params["reference_source"] = str(reference.resolve())
         if looks_like_relations(reference):
             matched, missed = match_relations(
                 read_relations(reference), scan_log.timestamps, tolerance=min(time_tolerance, 1e-3)
@@ -219,8 +388,28 @@ def candidates(
                 raise InputError(reference, f"no relation matches scans of {log} by timestamp")
             if missed:
                 typer.echo(f"{reference}: {missed} relation(s) match no scan pair", err=True)
+            if loops and len(matched) > max_loops:
+                typer.echo(
+                    f"{reference}: kept {max_loops} of {len(matched)} relations as loop "
+                    "edges (--max)",
+                    err=True,
+                )
         else:
-            scan_log = with_reference(scan_log, open_log(reference), time_tolerance)
+            params["time_offset"] = time_offset
+            scan_log = with_reference(scan_log, open_log(reference), time_tolerance, time_offset)
+            joined = sum(s.reference is not None for s in scan_log.scans)
+            if joined < len(scan_log):
+                typer.echo(
+                    f"{reference}: {joined} of {len(scan_log)} scans joined a reference pose; "
+                    "edges are made between those scans",
+                    err=True,
+                )
+    if matched is None and not any(s.reference is not None for s in scan_log.scans):
+        typer.echo(
+            f"{log}: no reference poses found (a raw log, no TRUEPOS, no --reference), so "
+            "edges are unlabelled and loop pairs come from odometry",
+            err=True,
+        )
     config = CandidateConfig(
         sequential=sequential,
         loops=loops,
@@ -238,7 +427,10 @@ def candidates(
     start = time.perf_counter()
     edges = make_candidates(scan_log, ScanMatcher(), config, thresholds, matched, params)
     seconds = time.perf_counter() - start
-    write_edges(out, edges)
+    try:
+        write_edges(out, edges)
+    except OSError as exc:
+        raise InputError(out, f"cannot write ({exc.strerror or exc})") from None
     _print_edge_summary(edges, seconds, out)
 
 
@@ -255,18 +447,32 @@ def _print_edge_summary(edges: list[Any], seconds: float, out: Path) -> None:
             typer.echo(f"{kind:<12}" + "".join(f"{counts[(kind, lab)]:>12}" for lab in labels))
 
 
+def _png(value: Any) -> Any:
+    if value.is_dir():
+        raise typer.BadParameter(f"{value} is a folder; give a .png file name.")
+    if value.suffix.lower() != ".png":
+        raise typer.BadParameter(f"{value} must end in .png (pictures are written as PNG).")
+    return value
+
+
 @app.command()
 def vgm(
     edges_file: Annotated[Path, typer.Argument(metavar="EDGES.jsonl", help="Edges file.")],
-    edge: Annotated[str, typer.Option(help="edge_id (or a unique prefix) to draw.")],
-    png: Annotated[Path, typer.Option(help="Picture to write.")],
+    edge: Annotated[
+        str,
+        typer.Option(
+            metavar="ID",
+            help="edge_id (or a unique prefix) to draw; the first field of each line.",
+        ),
+    ],
+    png: Annotated[Path, typer.Option(metavar="FILE.png", help="Picture to write.", callback=_png)],
     guess: Annotated[
         bool,
         typer.Option(help="Place the current scan by the initial guess instead of the estimate."),
     ] = False,
-    size: Annotated[int, typer.Option(help="VGM cells per side.")] = 400,
-    resolution: Annotated[float, typer.Option(help="VGM cell edge, metres.")] = 0.05,
-    sigma: Annotated[float, typer.Option(help="VGM covariance regulariser, metres.")] = 0.02,
+    size: Annotated[int, typer.Option(help="VGM cells per side.", min=8)] = 400,
+    resolution: Annotated[float, _positive("VGM cell edge, metres (> 0).")] = 0.05,
+    sigma: Annotated[float, _positive("VGM covariance regulariser, metres (> 0).")] = 0.02,
 ) -> None:
     """Draw one edge: both scans in two colours over the two VGM channels."""
     from vgm_studio.matching.edges import read_edges
@@ -277,6 +483,7 @@ def vgm(
     if len(hits) != 1:
         what = "no edge" if not hits else f"{len(hits)} edges"
         raise InputError(edges_file, f"{what} with id {edge!r}")
+    _writable_file(png)
     edge_picture(
         hits[0],
         png,

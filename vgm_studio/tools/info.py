@@ -19,9 +19,7 @@ def summarize(log: ScanLog) -> dict[str, Any]:
         f"in {math.degrees(s.angle_increment):.3g}° steps"
         for s in log.scans
     )
-    stamps = log.timestamps
-    finite = stamps[np.isfinite(stamps)]
-    duration = float(finite.max() - finite.min()) if len(finite) > 1 else 0.0
+    duration, duration_note = log_duration(log.timestamps)
     points = [len(s.points()) for s in log.scans[:: max(1, len(log.scans) // 200)]]
     return {
         "path": str(log.path),
@@ -33,6 +31,7 @@ def summarize(log: ScanLog) -> dict[str, Any]:
         "max_range": sorted({round(s.max_range, 3) for s in log.scans}),
         "mean_points_per_scan": float(np.mean(points)) if points else 0.0,
         "duration_s": duration,
+        "duration_note": duration_note,
         "odometry": log.has_odometry,
         "reference": log.has_reference,
         "reference_origin": log.reference_origin,
@@ -43,6 +42,29 @@ def summarize(log: ScanLog) -> dict[str, Any]:
     }
 
 
+# A log whose clock steps back or stands still this often is not telling time: GMapping
+# output printed with too few digits repeats stamps; intel.clf's bursts step back 5% of the time.
+MAX_NON_INCREASING = 0.1
+# A gap longer than this between two scans is a clock jump (infinite-corridor's stamps wrap
+# at 2³²), not a pause in the run.
+MAX_GAP_S = 3600.0
+
+
+def log_duration(stamps: np.ndarray) -> tuple[float | None, str | None]:
+    """The time from the first scan to the last, when the timestamps can be believed.
+
+    Returns:
+        (seconds, None), or (None, why not) when scans lack a clock, timestamps repeat or step
+        back too often, or jump by more than ``MAX_GAP_S``.
+    """
+    if len(stamps) < 2 or not np.all(np.isfinite(stamps)):
+        return None, "no clock"
+    steps = np.diff(stamps)
+    if np.mean(steps <= 0) > MAX_NON_INCREASING or np.max(np.abs(steps)) > MAX_GAP_S:
+        return None, "timestamps repeat or jump"
+    return float(stamps.max() - stamps.min()), None
+
+
 def _counts(d: dict[Any, int], unit: str = "") -> str:
     return ", ".join(f"{k}{unit} ({v} scans)" if len(d) > 1 else f"{k}{unit}" for k, v in d.items())
 
@@ -50,7 +72,11 @@ def _counts(d: dict[Any, int], unit: str = "") -> str:
 def format_summary(s: dict[str, Any]) -> str:
     """Renders ``summarize``'s dict as aligned lines."""
     duration = s["duration_s"]
-    dur = f"{duration:.1f} s ({duration / 60:.1f} min)" if duration > 0 else "unknown (no clock)"
+    dur = (
+        f"{duration:.1f} s ({duration / 60:.1f} min)"
+        if duration is not None
+        else f"unknown ({s.get('duration_note') or 'no clock'})"
+    )
     pose_note = {
         "reference": "reference (corrected log)",
         "odometry": "odometry (raw log)",
