@@ -204,3 +204,40 @@ def test_files_without_labels_are_refused(tmp_path):
     write_edges(path, [Edge("e", "x.log", "h", 0, 1, 0.0, 1.0, "loop", [0, 0, 0], [0, 0, 0])])
     with pytest.raises(InputError, match="no edge labelled success or failure"):
         read_labelled([Path(path)], progress=False)
+
+
+def test_train_and_eval_commands(sim_edges, tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    def cli(*args):
+        return subprocess.run(
+            [sys.executable, "-m", "vgm_studio.tools.cmd", *map(str, args)],
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+
+    model = tmp_path / "score.pt"
+    trained = cli("train", sim_edges[0], "--model", "score", "--out", model)
+    assert trained.returncode == 0, trained.stderr
+    assert "validation: accuracy" in trained.stdout
+    report = tmp_path / "eval.json"
+    proc = cli("eval", model, sim_edges[1], "--json", report)
+    assert proc.returncode == 0, proc.stderr
+    assert "ROC AUC" in proc.stdout and "TP" in proc.stdout
+    figures = json.loads(report.read_text())
+    held = read_labelled([sim_edges[1]], progress=False)
+    v = Validator.load(model)
+    want = binary_metrics(held.labels, v.predict_samples(held.samples), v.threshold)
+    for key in ("accuracy", "precision", "recall", "f1", "auc", "tp", "fp", "tn", "fn", "n"):
+        assert figures[key] == pytest.approx(want[key]), key
+    assert figures["tp"] + figures["fp"] + figures["tn"] + figures["fn"] == figures["n"]
+
+    bad = cli("train", sim_edges[0], "--model", "transformer", "--out", model)
+    assert bad.returncode == 2 and "--model" in bad.stderr and "Traceback" not in bad.stderr
+    wrong_suffix = cli("train", sim_edges[0], "--out", tmp_path / "m.bin")
+    assert wrong_suffix.returncode == 2 and ".pt" in wrong_suffix.stderr
+    missing = cli("eval", tmp_path / "none.pt", sim_edges[1])
+    assert missing.returncode == 1 and "no such model file" in missing.stderr

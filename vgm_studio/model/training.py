@@ -60,7 +60,7 @@ class TrainConfig:
     """
 
     model: str = "vgmnet"
-    epochs: int = 20
+    epochs: int = 12
     batch_size: int = 64
     lr: float = 2e-3
     weight_decay: float = 1e-4

@@ -18,6 +18,7 @@ import typer
 
 from vgm_studio.datasets import ReadOptions, ScanLog, open_log
 from vgm_studio.errors import InputError
+from vgm_studio.tools import model_cmds
 
 app = typer.Typer(
     name="vgm-studio",
@@ -504,6 +505,10 @@ def demo(
     from vgm_studio.tools.demo import run_demo
 
     run_demo(DEMO_LOG, out)
+
+
+app.command("train")(model_cmds.train)
+app.command("eval")(model_cmds.evaluate)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -34,7 +34,7 @@ def train(
     edges: EdgesArg,
     out: Annotated[Path, typer.Option(help="Checkpoint to write (.pt).")],
     model: Annotated[ModelName, typer.Option(help="Which model.")] = ModelName.vgmnet,
-    epochs: Annotated[int, typer.Option(min=1, help="Epochs at most.")] = 20,
+    epochs: Annotated[int, typer.Option(min=1, help="Epochs at most.")] = 12,
     batch_size: Annotated[int, typer.Option(min=1, help="Pairs per step.")] = 64,
     lr: Annotated[float, typer.Option(min=0.0, help="Adam learning rate.")] = 2e-3,
     patience: Annotated[int, typer.Option(min=1, help="Early-stopping patience.")] = 4,
