@@ -17,6 +17,17 @@ def _block(c_in: int, c_out: int, stride: int = 2) -> nn.Sequential:
     )
 
 
+def _stack(
+    stem: list[nn.Module], c_in: int, channels: tuple[int, ...]
+) -> tuple[nn.Sequential, int]:
+    """``stem`` then one stride-2 block per entry of ``channels``; returns it and its width."""
+    layers = list(stem)
+    for ch in channels:
+        layers.append(_block(c_in, ch))
+        c_in = ch
+    return nn.Sequential(*layers), c_in
+
+
 class _PooledHead(nn.Module):
     """Global average and max pooling, then an MLP to one logit (the sigmoid is in the loss).
 
@@ -58,13 +69,9 @@ class VGMNetPaper(nn.Module):
     def __init__(self, config: PaperConfig | None = None) -> None:
         super().__init__()
         c = config or PaperConfig()
-        layers: list[nn.Module] = [nn.Conv2d(2, c.pointwise, 1), nn.ReLU(inplace=True)]
-        prev = c.pointwise
-        for ch in c.channels:
-            layers.append(_block(prev, ch))
-            prev = ch
-        self.features = nn.Sequential(*layers)
-        self.head = _PooledHead(prev, c.hidden, c.dropout)
+        stem = [nn.Conv2d(2, c.pointwise, 1), nn.ReLU(inplace=True)]
+        self.features, width = _stack(stem, c.pointwise, c.channels)
+        self.head = _PooledHead(width, c.hidden, c.dropout)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.head(self.features(x))
@@ -86,23 +93,19 @@ class SparseConfig:
 
 
 class VGMNet(nn.Module):
-    """Space-to-depth VGM-Net: ~15× fewer multiply-adds than the paper's network."""
+    """Space-to-depth VGM-Net: ~20× cheaper per pair than the paper's network on a CPU."""
 
     def __init__(self, config: SparseConfig | None = None) -> None:
         super().__init__()
         c = config or SparseConfig()
         self.fold = nn.PixelUnshuffle(c.fold)
-        layers: list[nn.Module] = [
+        stem = [
             nn.Conv2d(2 * c.fold * c.fold, c.pointwise, 1, bias=False),
             nn.BatchNorm2d(c.pointwise),
             nn.ReLU(inplace=True),
         ]
-        prev = c.pointwise
-        for ch in c.channels:
-            layers.append(_block(prev, ch))
-            prev = ch
-        self.features = nn.Sequential(*layers)
-        self.head = _PooledHead(prev, c.hidden, c.dropout, extra=2 if c.figures else 0)
+        self.features, width = _stack(stem, c.pointwise, c.channels)
+        self.head = _PooledHead(width, c.hidden, c.dropout, extra=2 if c.figures else 0)
 
     def forward(self, x: torch.Tensor, extra: torch.Tensor | None = None) -> torch.Tensor:
         """Takes (B, 2, S, S) VGMs, or the same already folded to (B, 2·f², S/f, S/f), and,
@@ -129,13 +132,8 @@ class RGBNet(nn.Module):
     def __init__(self, config: RGBConfig | None = None) -> None:
         super().__init__()
         c = config or RGBConfig()
-        layers: list[nn.Module] = []
-        prev = 3
-        for ch in c.channels:
-            layers.append(_block(prev, ch))
-            prev = ch
-        self.features = nn.Sequential(*layers)
-        self.head = _PooledHead(prev, c.hidden, c.dropout)
+        self.features, width = _stack([], 3, c.channels)
+        self.head = _PooledHead(width, c.hidden, c.dropout)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.head(self.features(x))
