@@ -241,3 +241,30 @@ def test_train_and_eval_commands(sim_edges, tmp_path):
     assert wrong_suffix.returncode == 2 and ".pt" in wrong_suffix.stderr
     missing = cli("eval", tmp_path / "none.pt", sim_edges[1])
     assert missing.returncode == 1 and "no such model file" in missing.stderr
+
+
+def test_prefolded_lifted_input_matches_network_on_raw_vgms():
+    from vgm_studio.model.features import figures_matrix
+    from vgm_studio.model.networks import build_network
+    from vgm_studio.model.validator import input_spec
+
+    torch.manual_seed(0)
+    net, hyper = build_network("vgmnet", {"figures": True})
+    net.eval()
+    spec = input_spec("vgmnet", hyper, VGMParams())
+    assert spec.fold == 8 and spec.lift == 0.5
+    rng = np.random.default_rng(3)
+    samples = [
+        PairSample(
+            rng.normal(0, 4, (300, 2)).astype(np.float32),
+            rng.normal(0, 4, (250, 2)).astype(np.float32),
+            0.4,
+            0.02,
+        )
+        for _ in range(3)
+    ]
+    x, extra = spec.tensors(samples, torch.device("cpu"))
+    raw = torch.from_numpy(vgm_batch(samples, VGMParams()).copy())
+    figs = torch.from_numpy(figures_matrix(samples).astype(np.float32))
+    with torch.inference_mode():
+        np.testing.assert_allclose(net(x, extra).numpy(), net(raw, figs).numpy(), atol=1e-5)

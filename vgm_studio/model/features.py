@@ -71,17 +71,23 @@ def vgm_batch(
     params: VGMParams,
     rotations: Sequence[float] | NDArray[np.float64] | None = None,
     fold: int = 1,
+    lift: float = 1.0,
 ) -> NDArray[np.float32]:
-    """VGMs of a batch; ``rotations`` turn whole pairs (augmentation).
+    """VGMs of a batch; ``rotations`` turn whole pairs (augmentation), ``lift`` raises the
+    occupied cells' values to that power.
 
     With ``fold`` f > 1 the result is space-to-depth folded, (B, 2·f², size/f, size/f), laid
     out as ``torch.nn.PixelUnshuffle(f)`` would give, but written straight from the occupied
-    cells: no dense 400×400 copy to shuffle. ``fold=1`` gives (B, 2, size, size).
+    cells: no dense 400×400 copy to shuffle. ``fold=1`` gives (B, 2, size, size). The array
+    is a channels-last view (``.transpose(0, 3, 1, 2)`` of a (B, H, W, C) buffer).
     """
     if params.size % fold:
         raise ValueError(f"VGM size {params.size} is not a multiple of fold {fold}")
     side = params.size // fold
-    out = np.zeros((len(samples), 2 * fold * fold, side, side), dtype=np.float32)
+    depth = 2 * fold * fold
+    # Written channels-last (B, H, W, C) and returned as a (B, C, H, W) view: torch takes it
+    # as a channels-last tensor without copying the mostly-zero batch once more.
+    out = np.zeros((len(samples), side, side, depth), dtype=np.float32)
     flat = out.reshape(len(samples), -1)
     for k, s in enumerate(samples):
         prev, cur = s.prev, s.cur
@@ -91,10 +97,12 @@ def vgm_batch(
             cell, value = grid_cells(
                 pts, size=params.size, resolution=params.resolution, sigma=params.sigma
             )
+            if lift != 1.0:
+                value = value**lift
             i, j = np.divmod(cell, params.size)
             channel = (c * fold + i % fold) * fold + j % fold
-            flat[k, (channel * side + i // fold) * side + j // fold] = value
-    return out
+            flat[k, ((i // fold) * side + j // fold) * depth + channel] = value
+    return out.transpose(0, 3, 1, 2)
 
 
 # Each point a 3-pixel dot, as in a scatter plot.

@@ -45,6 +45,7 @@ class InputSpec:
     fold: int = 1
     image: int = 200
     figures: bool = False
+    lift: float = 1.0
 
     def batch(
         self,
@@ -52,7 +53,7 @@ class InputSpec:
         rotations: Sequence[float] | NDArray[np.float64] | None = None,
     ) -> NDArray[Any]:
         if self.kind == "vgm":
-            return vgm_batch(samples, self.vgm, rotations, fold=self.fold)
+            return vgm_batch(samples, self.vgm, rotations, fold=self.fold, lift=self.lift)
         if self.kind == "rgb":
             return rgb_batch(samples, self.image, rotations)
         return figures_matrix(samples)
@@ -77,9 +78,10 @@ def input_spec(model: str, hyper: dict[str, Any], vgm: VGMParams) -> InputSpec:
         return InputSpec("figures", vgm)
     if model == "rgb-baseline":
         return InputSpec("rgb", vgm, image=int(hyper.get("image", 200)))
-    return InputSpec(
-        "vgm", vgm, fold=int(hyper.get("fold", 1)), figures=bool(hyper.get("figures", False))
-    )
+    fold = int(hyper.get("fold", 1))
+    # A folded batch is written already lifted (see VGMNet.forward); unfolded ones are not.
+    lift = float(hyper.get("lift", 1.0)) if fold > 1 else 1.0
+    return InputSpec("vgm", vgm, fold=fold, figures=bool(hyper.get("figures", False)), lift=lift)
 
 
 class Validator:
@@ -98,15 +100,17 @@ class Validator:
         self.name: str = checkpoint["model"]
         self.vgm = VGMParams(**checkpoint["vgm"])
         self.hyper: dict[str, Any] = checkpoint.get("hyper", {})
-        self.spec = input_spec(self.name, self.hyper, self.vgm)
         self.threshold = float(checkpoint.get("threshold", 0.5))
         self.device = pick_device(device)
         self.network: nn.Module | None = None
         self.score: ScoreModel | None = None
         if self.name == "score":
             self.score = ScoreModel(**checkpoint["score"])
+            self.spec = input_spec(self.name, self.hyper, self.vgm)
         else:
-            net, _ = build_network(self.name, self.hyper)
+            # The full hyper-parameters (defaults included) decide how inputs are made.
+            net, full = build_network(self.name, self.hyper)
+            self.spec = input_spec(self.name, full, self.vgm)
             net.load_state_dict(checkpoint["state_dict"])
             net.eval()
             self.network = net.to(self.device).to(memory_format=torch.channels_last)  # type: ignore[call-overload]
