@@ -67,17 +67,22 @@ def test_split_holds_out_every_group_and_label():
     assert np.array_equal(stratified_split(labels, groups, 0.25, seed=1)[1], va)
 
 
-def test_folded_vgm_batch_equals_pixel_unshuffle_of_pair_map():
-    rng = np.random.default_rng(0)
-    samples = [
+def random_samples(count: int, seed: int) -> list[PairSample]:
+    """Pairs of random Gaussian point clouds of different sizes, with made-up figures."""
+    rng = np.random.default_rng(seed)
+    return [
         PairSample(
             rng.normal(0, 4, (300, 2)).astype(np.float32),
             rng.normal(0, 4, (280, 2)).astype(np.float32),
             0.5,
             0.01,
         )
-        for _ in range(3)
+        for _ in range(count)
     ]
+
+
+def test_folded_vgm_batch_equals_pixel_unshuffle_of_pair_map():
+    samples = random_samples(3, seed=0)
     params = VGMParams()
     dense = vgm_batch(samples, params)
     np.testing.assert_array_equal(dense[1], pair_map(samples[1].prev, samples[1].cur, [0, 0, 0]))
@@ -253,16 +258,7 @@ def test_prefolded_lifted_input_matches_network_on_raw_vgms():
     net.eval()
     spec = input_spec("vgmnet", hyper, VGMParams())
     assert spec.fold == 8 and spec.lift == 0.5
-    rng = np.random.default_rng(3)
-    samples = [
-        PairSample(
-            rng.normal(0, 4, (300, 2)).astype(np.float32),
-            rng.normal(0, 4, (250, 2)).astype(np.float32),
-            0.4,
-            0.02,
-        )
-        for _ in range(3)
-    ]
+    samples = random_samples(3, seed=3)
     x, extra = spec.tensors(samples, torch.device("cpu"))
     raw = torch.from_numpy(vgm_batch(samples, VGMParams()).copy())
     figs = torch.from_numpy(figures_matrix(samples).astype(np.float32))
