@@ -32,7 +32,13 @@ from vgm_studio.model.features import PairSample, figures_matrix, load_samples
 from vgm_studio.model.metrics import binary_metrics
 from vgm_studio.model.networks import build_network
 from vgm_studio.model.score import ScoreModel
-from vgm_studio.model.validator import InputSpec, input_spec, pick_device
+from vgm_studio.model.validator import (
+    InputSpec,
+    batched_logits,
+    forward,
+    input_spec,
+    pick_device,
+)
 from vgm_studio.vgm.grid import VGMParams
 
 
@@ -183,22 +189,6 @@ def _balanced_bce(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     ).sum()
 
 
-def _forward(net: nn.Module, x: torch.Tensor, extra: torch.Tensor | None) -> torch.Tensor:
-    return net(x, extra) if extra is not None else net(x)
-
-
-def _predict(
-    net: nn.Module, spec: InputSpec, samples: Sequence[PairSample], device: torch.device, batch: int
-) -> NDArray[np.float64]:
-    net.eval()
-    out = []
-    with torch.inference_mode():
-        for s in range(0, len(samples), batch):
-            x, extra = spec.tensors(samples[s : s + batch], device)
-            out.append(_forward(net, x, extra).float().cpu().numpy())
-    return np.concatenate(out) if out else np.zeros(0)
-
-
 def train(
     data: LabelledSet,
     config: TrainConfig,
@@ -253,7 +243,7 @@ def train(
             net, spec, data, train_idx, val_samples, val_labels, config, device, progress, log
         )
         net.load_state_dict(state)
-        probs = 1.0 / (1.0 + np.exp(-_predict(net, spec, val_samples, device, 128)))
+        probs = 1.0 / (1.0 + np.exp(-batched_logits(net, spec, val_samples, device, 128)))
         payload |= {
             "hyper": hyper,
             "device": str(device),
@@ -318,14 +308,14 @@ def _fit(
             rot = rng.uniform(0, 2 * np.pi, len(idx)) if config.augment else None
             x, extra = spec.tensors([data.samples[i] for i in idx], device, rot)
             y = torch.from_numpy(data.labels[idx].astype(np.float32)).to(device)
-            loss = nn.functional.binary_cross_entropy_with_logits(_forward(net, x, extra), y)
+            loss = nn.functional.binary_cross_entropy_with_logits(forward(net, x, extra), y)
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
             optimiser.step()
             schedule.step()
             total += float(loss.detach())
             bar.set_postfix(loss=f"{total / (step + 1):.3f}")
-        logits = torch.from_numpy(_predict(net, spec, val_samples, device, 128))
+        logits = torch.from_numpy(batched_logits(net, spec, val_samples, device, 128))
         val_loss = float(_balanced_bce(logits, val_target))
         acc = float(((logits > 0).numpy() == val_labels).mean()) if len(val_labels) else math.nan
         history.append(

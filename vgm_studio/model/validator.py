@@ -84,6 +84,29 @@ def input_spec(model: str, hyper: dict[str, Any], vgm: VGMParams) -> InputSpec:
     return InputSpec("vgm", vgm, fold=fold, figures=bool(hyper.get("figures", False)), lift=lift)
 
 
+def forward(net: nn.Module, x: torch.Tensor, extra: torch.Tensor | None) -> torch.Tensor:
+    """One forward pass; networks built without matcher figures take the image alone."""
+    return net(x, extra) if extra is not None else net(x)
+
+
+def batched_logits(
+    net: nn.Module,
+    spec: InputSpec,
+    samples: Sequence[PairSample],
+    device: torch.device,
+    batch_size: int,
+) -> NDArray[np.float64]:
+    """The network's logits for every sample, in eval mode, ``batch_size`` at a time."""
+    net.eval()
+    out = np.empty(len(samples), dtype=np.float64)
+    with torch.inference_mode():
+        for start in range(0, len(samples), batch_size):
+            chunk = samples[start : start + batch_size]
+            x, extra = spec.tensors(chunk, device)
+            out[start : start + len(chunk)] = forward(net, x, extra).float().cpu().numpy()
+    return out
+
+
 class Validator:
     """A trained model that says p(success) for matched scan pairs.
 
@@ -135,14 +158,8 @@ class Validator:
         if self.score is not None:
             return self.score.predict(figures_matrix(samples))
         assert self.network is not None
-        out = np.empty(len(samples), dtype=np.float64)
-        with torch.inference_mode():
-            for start in range(0, len(samples), batch_size):
-                chunk = samples[start : start + batch_size]
-                x, extra = self.spec.tensors(chunk, self.device)
-                logits = self.network(x, extra) if extra is not None else self.network(x)
-                out[start : start + len(chunk)] = torch.sigmoid(logits).cpu().numpy()
-        return out
+        logits = batched_logits(self.network, self.spec, samples, self.device, batch_size)
+        return np.asarray(1.0 / (1.0 + np.exp(-logits)))
 
     def decide(self, probabilities: NDArray[np.float64]) -> NDArray[np.bool_]:
         """True (keep the edge) where p(success) reaches the checkpoint's threshold."""
