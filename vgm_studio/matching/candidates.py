@@ -96,11 +96,17 @@ def loop_pairs(
     a, b = pairs[:, 0], pairs[:, 1]
     dtheta = np.abs(se2.wrap_angle(poses[b, 2] - poses[a, 2]))
     pairs = pairs[(b - a >= config.min_gap) & (dtheta <= math.radians(config.max_angle_deg))]
-    if len(pairs) > config.max_loops:
-        rng = np.random.default_rng(config.seed)
-        pairs = pairs[rng.choice(len(pairs), size=config.max_loops, replace=False)]
+    pairs = pairs[_sample(len(pairs), config)]
     order = np.lexsort((pairs[:, 1], pairs[:, 0]))
     return pairs[order]
+
+
+def _sample(count: int, config: CandidateConfig) -> NDArray[np.int64]:
+    """Sorted indices of at most ``max_loops`` of ``count`` items, drawn with ``seed``."""
+    if count <= config.max_loops:
+        return np.arange(count)
+    rng = np.random.default_rng(config.seed)
+    return np.sort(rng.choice(count, size=config.max_loops, replace=False))
 
 
 def _noise(config: CandidateConfig, count: int) -> NDArray[np.float64]:
@@ -125,9 +131,9 @@ def plan_pairs(
     else:
         notes["odometry"] = "log"
     refs = [s.reference for s in log.scans]
+    has_ref = np.array([r is not None for r in refs])
     pairs: list[_Pair] = []
     if config.sequential:
-        has_ref = np.array([r is not None for r in refs])
         pool = np.arange(len(refs))
         if 2 <= has_ref.sum() < len(refs):
             # A reference that covers only some scans (GMapping keeps one scan in ~15) makes
@@ -147,20 +153,15 @@ def plan_pairs(
             )
     if config.loops and relations is not None:
         notes["loop_source"] = "relations"
-        chosen = relations
-        if len(chosen) > config.max_loops:
-            rng = np.random.default_rng(config.seed)
-            keep = np.sort(rng.choice(len(chosen), size=config.max_loops, replace=False))
-            chosen = [relations[i] for i in keep]
+        chosen = [relations[i] for i in _sample(len(relations), config)]
         noise = _noise(config, len(chosen))
         for rel, n in zip(chosen, noise, strict=True):
             pairs.append(_Pair(rel.a, rel.b, "loop", _perturb(rel.pose, n), rel.pose))
     elif config.loops:
-        usable = np.array([r is not None for r in refs])
-        if usable.sum() >= 2:
+        if has_ref.sum() >= 2:
             notes["loop_source"] = "reference"
             poses = np.array([r if r is not None else np.zeros(3) for r in refs])
-            found = loop_pairs(poses, config, usable)
+            found = loop_pairs(poses, config, has_ref)
             noise = _noise(config, len(found))
             for (a, b), n in zip(found, noise, strict=True):
                 ref = se2.between(poses[a], poses[b])
