@@ -9,16 +9,16 @@ import sys
 import tempfile
 import time
 from collections import Counter
-from dataclasses import asdict
 from enum import Enum
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
-from vgm_studio.datasets import ReadOptions, ScanLog, open_log
+from vgm_studio.datasets import ReadOptions, open_log
 from vgm_studio.errors import InputError
 from vgm_studio.tools import model_cmds
+from vgm_studio.tools.sources import report_skipped
 
 app = typer.Typer(
     name="vgm-studio",
@@ -157,14 +157,6 @@ def _read_options(
     )
 
 
-def _report_skipped(log: ScanLog) -> None:
-    if log.skipped_lines:
-        lines = log.skipped_line_numbers
-        shown = ", ".join(map(str, lines[:5])) + (", …" if len(lines) > 5 else "")
-        where = f" (line{'s' if len(lines) > 1 else ''} {shown})" if lines else ""
-        typer.echo(f"{log.path}: skipped {log.skipped_lines} malformed line(s){where}", err=True)
-
-
 @app.command()
 def info(
     log: Annotated[
@@ -209,7 +201,7 @@ def info(
     )
     summary = summarize(scan_log)
     typer.echo(json.dumps(summary, indent=2) if as_json else format_summary(summary))
-    _report_skipped(scan_log)
+    report_skipped(scan_log)
 
 
 def _preset(value: Any) -> Any:
@@ -352,12 +344,11 @@ def candidates(
     odom_topic: OdomTopicOpt = None,
 ) -> None:
     """Match candidate edges of a log and label them against a reference; write JSONL."""
-    from vgm_studio.datasets.reference import with_reference
-    from vgm_studio.datasets.relations import looks_like_relations, match_relations, read_relations
     from vgm_studio.matching.candidates import CandidateConfig, make_candidates
     from vgm_studio.matching.edges import write_edges
     from vgm_studio.matching.labels import LabelThresholds
     from vgm_studio.matching.matcher import ScanMatcher
+    from vgm_studio.tools.sources import read_source
 
     if not sequential and not loops:
         raise typer.BadParameter("--no-sequential and --no-loops leave no edges to make.")
@@ -369,48 +360,16 @@ def candidates(
         raise typer.BadParameter(
             f"--success-theta {success_theta:g} must be below --failure-theta {failure_theta:g}."
         )
-    if log.is_file() and looks_like_relations(log):
-        raise InputError(
-            log, "this is a Freiburg relations file; pass it as --reference, after the log"
-        )
     _writable_file(out)
     options = _read_options(poses, fov, max_range, laser, skip_bad_lines, scan_topic, odom_topic)
-    scan_log = open_log(log, options)
-    _report_skipped(scan_log)
-    params: dict[str, Any] = {"read": asdict(options), "reference_source": "log"}
-    matched = None
-    if reference is not None:
-        params["reference_source"] = str(reference.resolve())
-        if looks_like_relations(reference):
-            matched, missed = match_relations(
-                read_relations(reference), scan_log.timestamps, tolerance=min(time_tolerance, 1e-3)
-            )
-            if not matched:
-                raise InputError(reference, f"no relation matches scans of {log} by timestamp")
-            if missed:
-                typer.echo(f"{reference}: {missed} relation(s) match no scan pair", err=True)
-            if loops and len(matched) > max_loops:
-                typer.echo(
-                    f"{reference}: kept {max_loops} of {len(matched)} relations as loop "
-                    "edges (--max)",
-                    err=True,
-                )
-        else:
-            params["time_offset"] = time_offset
-            scan_log = with_reference(scan_log, open_log(reference), time_tolerance, time_offset)
-            joined = sum(s.reference is not None for s in scan_log.scans)
-            if joined < len(scan_log):
-                typer.echo(
-                    f"{reference}: {joined} of {len(scan_log)} scans joined a reference pose; "
-                    "edges are made between those scans",
-                    err=True,
-                )
-    if matched is None and not any(s.reference is not None for s in scan_log.scans):
-        typer.echo(
-            f"{log}: no reference poses found (a raw log, no TRUEPOS, no --reference), so "
-            "edges are unlabelled and loop pairs come from odometry",
-            err=True,
-        )
+    source = read_source(
+        log,
+        options,
+        reference,
+        time_tolerance=time_tolerance,
+        time_offset=time_offset,
+        max_loops=max_loops if loops else None,
+    )
     config = CandidateConfig(
         sequential=sequential,
         loops=loops,
@@ -426,7 +385,9 @@ def candidates(
     )
     thresholds = LabelThresholds(success_xy, success_theta, failure_xy, failure_theta)
     start = time.perf_counter()
-    edges = make_candidates(scan_log, ScanMatcher(), config, thresholds, matched, params)
+    edges = make_candidates(
+        source.log, ScanMatcher(), config, thresholds, source.relations, source.params
+    )
     seconds = time.perf_counter() - start
     try:
         write_edges(out, edges)
