@@ -33,3 +33,25 @@ def artifacts() -> Path:
     path = REPO / "test-artifacts"
     path.mkdir(exist_ok=True)
     return path
+
+
+@pytest.fixture(scope="session")
+def office_edges(tmp_path_factory) -> Path:
+    """A small simulated office log and its labelled candidate edges (JSONL), made once."""
+    from vgm_studio.datasets import open_log
+    from vgm_studio.matching.candidates import CandidateConfig, make_candidates
+    from vgm_studio.matching.edges import write_edges
+    from vgm_studio.matching.matcher import ScanMatcher
+    from vgm_studio.simulation.simulate import SimConfig, simulate
+
+    folder = tmp_path_factory.mktemp("office")
+    log = open_log(simulate(SimConfig(preset="office", seed=5, laps=1.0, num_beams=181), folder))
+    edges = make_candidates(
+        log,
+        ScanMatcher(),
+        CandidateConfig(max_loops=40, seed=5, keyframe_distance=1.0),
+        progress=False,
+    )
+    path = folder / "edges.jsonl"
+    write_edges(path, edges)
+    return path

@@ -1,0 +1,136 @@
+"""The label store: committed labels, undo as history, conflicts, versions, export and import."""
+
+from __future__ import annotations
+
+import sqlite3
+
+import pytest
+
+from vgm_studio.errors import InputError
+from vgm_studio.labels import LabelStore
+from vgm_studio.labels.transfer import export_labels, import_labels
+from vgm_studio.matching.edges import read_edges
+
+
+@pytest.fixture
+def store(tmp_path, office_edges) -> LabelStore:
+    s = LabelStore(tmp_path / "ws")
+    s.add_edges(read_edges(office_edges))
+    return s
+
+
+def test_every_label_is_committed_and_seen_by_another_connection(store):
+    first = store.edge_ids()[0]
+    store.label(first, "ana", "success", note="clean corridor")
+    # A separate connection (another process would be the same) sees it at once.
+    other = sqlite3.connect(store.path)
+    assert other.execute("SELECT label, note FROM labels").fetchall() == [
+        ("success", "clean corridor")
+    ]
+    assert other.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+
+
+def test_undo_appends_history_and_restores_the_previous_label(store):
+    edge = store.edge_ids()[3]
+    first = store.label(edge, "ana", "success")
+    second = store.label(edge, "ana", "failure", note="slid one door")
+    store.undo(second.id)
+    assert [(r.label, r.note) for r in store.labels(edge)] == [("success", "")]
+    assert store.labels(edge)[0].labeled_at == first.made_at
+    store.undo(first.id)
+    assert store.labels(edge) == []
+    actions = [(e.action, e.label) for e in store.history(edge)]
+    assert actions == [
+        ("label", "success"),
+        ("label", "failure"),
+        ("undo", "success"),
+        ("undo", None),
+    ]
+    with pytest.raises(ValueError, match="undone already"):
+        store.undo(first.id)
+
+
+def test_undo_refuses_a_label_overtaken_by_a_later_one(store):
+    edge = store.edge_ids()[1]
+    old = store.label(edge, "ana", "success")
+    store.label(edge, "ana", "failure")
+    with pytest.raises(ValueError, match="overtaken"):
+        store.undo(old.id)
+
+
+def test_two_annotators_who_disagree_are_both_kept(store):
+    edge = store.edge_ids()[2]
+    store.label(edge, "ana", "success")
+    store.label(edge, "ben", "failure")
+    assert store.label_map()[edge] == {"ana": "success", "ben": "failure"}
+
+
+def test_candidates_made_again_keep_their_labels(store, office_edges):
+    edge = store.edge_ids()[5]
+    store.label(edge, "ana", "failure")
+    count = store.count_edges()
+    assert store.add_edges(read_edges(office_edges)) == 0
+    assert store.count_edges() == count
+    assert store.label_map()[edge] == {"ana": "failure"}
+
+
+def test_a_workspace_of_another_schema_is_refused(tmp_path):
+    LabelStore(tmp_path / "ws").close()
+    db = sqlite3.connect(tmp_path / "ws" / "labels.sqlite")
+    db.execute("UPDATE meta SET value = '99' WHERE key = 'schema'")
+    db.commit()
+    with pytest.raises(InputError, match="schema 99"):
+        LabelStore(tmp_path / "ws")
+
+
+def test_a_foreign_database_is_refused(tmp_path):
+    (tmp_path / "ws").mkdir()
+    (tmp_path / "ws" / "labels.sqlite").write_bytes(b"definitely not sqlite" * 100)
+    with pytest.raises(InputError, match="not a VGM Studio workspace"):
+        LabelStore(tmp_path / "ws")
+
+
+@pytest.mark.parametrize("suffix", [".jsonl", ".csv"])
+def test_export_then_import_gives_the_same_store(store, tmp_path, suffix):
+    ids = store.edge_ids()
+    store.label(ids[0], "ana", "success", note='says "fine", really')
+    store.label(ids[1], "ana", "failure")
+    store.label(ids[1], "ben", "success", note="line\nbreak")
+    out = tmp_path / f"labels{suffix}"
+    assert export_labels(store, out) == 3
+    fresh = LabelStore(tmp_path / "fresh")
+    assert import_labels(fresh, out) == (2, 3)
+    assert fresh.labels() == store.labels()
+    assert [fresh.edge(i).to_json() for i in ids[:2]] == [store.edge(i).to_json() for i in ids[:2]]
+    again = tmp_path / f"again{suffix}"
+    export_labels(fresh, again)
+    assert again.read_bytes() == out.read_bytes()
+    assert import_labels(fresh, out) == (0, 0)  # importing twice changes nothing
+
+
+def test_exported_jsonl_is_a_training_file(store, tmp_path):
+    ids = store.edge_ids()
+    store.label(ids[0], "ana", "failure")
+    out = tmp_path / "labels.jsonl"
+    export_labels(store, out)
+    (edge,) = read_edges(out)
+    assert edge.label == "failure"
+
+
+def test_a_bad_import_line_names_file_and_line_and_changes_nothing(store, tmp_path):
+    ids = store.edge_ids()
+    store.label(ids[0], "ana", "success")
+    good = tmp_path / "labels.jsonl"
+    export_labels(store, good)
+    bad = tmp_path / "bad.jsonl"
+    line = good.read_text().strip()
+    bad.write_text(line + "\n" + line.replace('"label":"success"', '"label":"maybe"') + "\n")
+    fresh = LabelStore(tmp_path / "fresh")
+    with pytest.raises(InputError) as err:
+        import_labels(fresh, bad)
+    assert str(err.value).startswith(f"{bad}:2: label 'maybe'")
+    assert fresh.count_edges() == 0
+    txt = tmp_path / "labels.txt"
+    txt.write_text(line + "\n")
+    with pytest.raises(InputError, match="unknown label file type '.txt'"):
+        import_labels(fresh, txt)
