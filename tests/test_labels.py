@@ -132,5 +132,5 @@ def test_a_bad_import_line_names_file_and_line_and_changes_nothing(store, tmp_pa
     assert fresh.count_edges() == 0
     txt = tmp_path / "labels.txt"
     txt.write_text(line + "\n")
-    with pytest.raises(InputError, match="unknown label file type '.txt'"):
+    with pytest.raises(InputError, match=r"unknown label file type '\.txt'"):
         import_labels(fresh, txt)
