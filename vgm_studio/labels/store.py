@@ -82,6 +82,15 @@ class LabelRecord:
 
 
 @dataclass(frozen=True)
+class Predictions:
+    """The active model's p(success) per edge, and the threshold it decides at."""
+
+    model: str | None
+    threshold: float
+    p: dict[str, float]
+
+
+@dataclass(frozen=True)
 class Event:
     """One appended history row: what an annotator did, and the state it left."""
 
@@ -400,8 +409,16 @@ class LabelStore:
 
     # -- predictions -------------------------------------------------------------------
 
-    def set_predictions(self, model: str, probabilities: dict[str, float]) -> None:
-        """Stores a model's p(success) per edge, replacing that model's earlier ones."""
+    def set_predictions(
+        self, model: str, probabilities: dict[str, float], threshold: float = 0.5
+    ) -> None:
+        """Stores a model's p(success) per edge and makes it the active model.
+
+        Args:
+            model: A name that tells model versions apart.
+            probabilities: edge_id → p(success).
+            threshold: p(success) at or above which the model says success.
+        """
         with self.transaction() as db:
             db.execute("DELETE FROM predictions WHERE model = ?", (model,))
             db.executemany(
@@ -409,12 +426,19 @@ class LabelStore:
                 [(k, model, float(v)) for k, v in probabilities.items()],
             )
             db.execute("INSERT OR REPLACE INTO meta VALUES ('active_model', ?)", (model,))
+            db.execute(
+                "INSERT OR REPLACE INTO meta VALUES ('active_threshold', ?)", (str(threshold),)
+            )
 
-    def predictions(self) -> tuple[str | None, dict[str, float]]:
-        """The active model's name and its p(success) per edge."""
-        rows = self._query("SELECT value FROM meta WHERE key = 'active_model'")
-        if not rows:
-            return None, {}
-        model = rows[0][0]
-        preds = self._query("SELECT edge_id, p FROM predictions WHERE model = ?", (model,))
-        return model, dict(preds)
+    def predictions(self) -> Predictions:
+        """The active model's predictions (empty when there is none)."""
+        meta = dict(
+            self._query(
+                "SELECT key, value FROM meta WHERE key IN ('active_model', 'active_threshold')"
+            )
+        )
+        model = meta.get("active_model")
+        if model is None:
+            return Predictions(None, 0.5, {})
+        rows = self._query("SELECT edge_id, p FROM predictions WHERE model = ?", (model,))
+        return Predictions(model, float(meta.get("active_threshold", 0.5)), dict(rows))

@@ -17,7 +17,7 @@ import typer
 
 from vgm_studio.datasets import ReadOptions, open_log
 from vgm_studio.errors import InputError
-from vgm_studio.tools import model_cmds
+from vgm_studio.tools import model_cmds, studio_cmds
 from vgm_studio.tools.sources import report_skipped
 
 app = typer.Typer(
@@ -28,9 +28,6 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
 )
-
-ASSETS = Path(__file__).resolve().parents[2]
-DEMO_LOG = ASSETS / "datasets" / "demo-seed0.log"
 
 
 class Poses(str, Enum):
@@ -458,18 +455,12 @@ def vgm(
     typer.echo(f"wrote {png}")
 
 
-@app.command()
-def demo(
-    out: Annotated[Path, typer.Option(help="Folder for the demo's outputs.")] = Path("vgm-demo"),
-) -> None:
-    """Run the pipeline on the bundled demo log: candidates, labels and VGM pictures."""
-    from vgm_studio.tools.demo import run_demo
-
-    run_demo(DEMO_LOG, out)
-
-
 app.command("train")(model_cmds.train)
 app.command("eval")(model_cmds.evaluate)
+app.command("label")(studio_cmds.label)
+app.command("demo")(studio_cmds.demo)
+app.command("export")(studio_cmds.export)
+app.command("import")(studio_cmds.import_)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -1,0 +1,357 @@
+"""The labeling studio: a viser server where each browser tab steps through edges and labels them.
+
+Every label goes to the store (committed) before the tab moves on. Each tab keeps its own queue
+and position; in the queues that hand out unlabelled edges, an edge shown in one tab is
+claimed and not handed to another.
+"""
+
+from __future__ import annotations
+
+import getpass
+import socket
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import viser
+
+from vgm_studio.errors import InputError
+from vgm_studio.labels.store import LabelStore
+from vgm_studio.matching.edge_scans import EdgeScans
+from vgm_studio.matching.edges import Edge
+from vgm_studio.studio.panel import Panel, build_panel, facts_text, position_text
+from vgm_studio.studio.queues import Queue, Snapshot, order
+from vgm_studio.studio.view import CUR_RGB, PREV_RGB, EdgeView, ViewCache, yaw_wxyz
+from vgm_studio.vgm.grid import VGMParams
+
+REFERENCE_RGB = (150, 150, 150)
+PREFETCH = 3
+
+
+def default_annotator() -> str:
+    try:
+        return getpass.getuser()
+    except (KeyError, OSError):
+        return "annotator"
+
+
+@dataclass
+class StudioConfig:
+    """How the studio serves.
+
+    Attributes:
+        host: Interface to listen on; 127.0.0.1 keeps it on this machine.
+        port: TCP port.
+        annotator: Name a new tab starts with.
+        queue: Queue a new tab starts in.
+        vgm: Grid the heatmap is drawn on.
+        title: Shown in the browser's title bar.
+    """
+
+    host: str = "127.0.0.1"
+    port: int = 8080
+    annotator: str = field(default_factory=default_annotator)
+    queue: Queue = Queue.unlabelled
+    vgm: VGMParams = field(default_factory=VGMParams)
+    title: str = "VGM Studio"
+
+
+@dataclass
+class _Tab:
+    """One browser tab's state. ``lock`` keeps its key presses in order."""
+
+    client: viser.ClientHandle
+    panel: Panel
+    queue: Queue
+    order: list[str]
+    index: int = 0
+    undo: list[tuple[int, str]] = field(default_factory=list)  # (event id, edge id)
+    lock: threading.RLock = field(default_factory=threading.RLock)
+
+    @property
+    def edge_id(self) -> str | None:
+        return self.order[self.index] if 0 <= self.index < len(self.order) else None
+
+
+def check_port_free(host: str, port: int) -> None:
+    """Fails before the server starts when another program holds the port.
+
+    Raises:
+        InputError: The port is in use or the host is not an address of this machine.
+    """
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+        except OSError as exc:
+            reason = "is in use; pass another --port" if exc.errno == 98 else f"({exc.strerror})"
+            raise InputError(f"{host}:{port}", f"cannot listen: the port {reason}") from None
+
+
+class Studio:
+    """Serves a workspace's edges for labeling.
+
+    Example:
+        >>> studio = Studio(LabelStore("ws"), StudioConfig(port=8080))
+        >>> studio.start()
+        >>> print(studio.url)
+    """
+
+    def __init__(
+        self, store: LabelStore, config: StudioConfig, scans: EdgeScans | None = None
+    ) -> None:
+        self.store = store
+        self.config = config
+        self._views = ViewCache(scans or EdgeScans(), config.vgm)
+        self._edge_ids = store.edge_ids()
+        self._edges: dict[str, Edge] = {}
+        self._predictions = store.predictions()
+        self._tabs: dict[int, _Tab] = {}
+        self._claims: dict[str, int] = {}
+        self._lock = threading.RLock()
+        self._prefetcher = ThreadPoolExecutor(max_workers=1, thread_name_prefix="prefetch")
+        self.server: viser.ViserServer | None = None
+        self.on_label: list[Callable[[], None]] = []
+
+    @property
+    def url(self) -> str:
+        host = "localhost" if self.config.host in ("127.0.0.1", "0.0.0.0") else self.config.host
+        return f"http://{host}:{self.config.port}"
+
+    def start(self) -> viser.ViserServer:
+        """Starts serving; returns at once (the server runs in its own threads)."""
+        check_port_free(self.config.host, self.config.port)
+        server = viser.ViserServer(host=self.config.host, port=self.config.port, verbose=False)
+        server.gui.configure_theme(
+            titlebar_content=None, control_layout="fixed", control_width="large", dark_mode=True
+        )
+        server.scene.set_up_direction("+z")
+        server.scene.world_axes.visible = False
+        server.on_client_connect(self._connect)
+        server.on_client_disconnect(self._disconnect)
+        self.server = server
+        return server
+
+    def stop(self) -> None:
+        if self.server is not None:
+            self.server.stop()
+        self._prefetcher.shutdown(wait=False, cancel_futures=True)
+
+    # -- predictions ---------------------------------------------------------------------
+
+    def refresh_predictions(self) -> None:
+        """Rereads the active model's predictions from the store and redraws every tab."""
+        self._predictions = self.store.predictions()
+        for tab in list(self._tabs.values()):
+            with tab.lock:
+                self._show(tab, draw_scene=False)
+
+    # -- tabs ----------------------------------------------------------------------------
+
+    def _snapshot(self) -> Snapshot:
+        preds = self._predictions
+        return Snapshot(self._edge_ids, self.store.label_map(), preds.p, preds.threshold)
+
+    def _tab_actions(self, tab: _Tab) -> dict[str, Callable[[], None]]:
+        return {
+            "success": lambda: self._label(tab, "success"),
+            "failure": lambda: self._label(tab, "failure"),
+            "skip": lambda: self._skip(tab),
+            "undo": lambda: self._undo(tab),
+            "previous": lambda: self._step(tab, -1),
+            "next": lambda: self._step(tab, +1),
+            "guess": lambda: self._toggle_guess(tab),
+        }
+
+    def _connect(self, client: viser.ClientHandle) -> None:
+        actions: dict[str, Callable[[], None]] = {}
+        panel = build_panel(client, self.config.annotator, self.config.queue, actions)
+        tab = _Tab(client, panel, self.config.queue, order(self.config.queue, self._snapshot()))
+        actions.update(self._tab_actions(tab))
+        panel.queue.on_update(lambda _e: self._switch_queue(tab, Queue(panel.queue.value)))
+        panel.show_guess.on_update(lambda _e: self._redraw(tab))
+        client.camera.position = (0.0, 0.0, 22.0)
+        client.camera.look_at = (0.0, 0.0, 0.0)
+        client.camera.up_direction = (0.0, 1.0, 0.0)
+        with tab.lock:
+            self._tabs[client.client_id] = tab
+            tab.index = -1
+            self._move(tab, +1)
+
+    def _disconnect(self, client: viser.ClientHandle) -> None:
+        with self._lock:
+            self._tabs.pop(client.client_id, None)
+            for edge_id in [e for e, c in self._claims.items() if c == client.client_id]:
+                del self._claims[edge_id]
+
+    def _edge(self, edge_id: str) -> Edge:
+        edge = self._edges.get(edge_id)
+        if edge is None:
+            edge = self._edges[edge_id] = self.store.edge(edge_id)
+        return edge
+
+    # -- actions -------------------------------------------------------------------------
+
+    def _label(self, tab: _Tab, label: str) -> None:
+        with tab.lock:
+            edge_id = tab.edge_id
+            if edge_id is None:
+                return
+            annotator = tab.panel.annotator.value.strip() or self.config.annotator
+            event = self.store.label(edge_id, annotator, label, tab.panel.note.value.strip())
+            tab.undo.append((event.id, edge_id))
+            tab.panel.note.value = ""  # type: ignore[misc]  # viser's setter, unseen by mypy
+            self._move(tab, +1)
+        for callback in self.on_label:
+            callback()
+
+    def _skip(self, tab: _Tab) -> None:
+        with tab.lock:
+            if tab.edge_id is not None:
+                annotator = tab.panel.annotator.value.strip() or self.config.annotator
+                self.store.skip(tab.edge_id, annotator)
+            self._move(tab, +1)
+
+    def _undo(self, tab: _Tab) -> None:
+        with tab.lock:
+            if not tab.undo:
+                tab.client.add_notification("Nothing to undo", "", auto_close_seconds=2.0)
+                return
+            event_id, edge_id = tab.undo.pop()
+            try:
+                self.store.undo(event_id)
+            except ValueError as exc:
+                tab.client.add_notification("Cannot undo", str(exc), auto_close_seconds=4.0)
+                return
+            if edge_id not in tab.order:
+                tab.order.insert(max(tab.index, 0), edge_id)
+            tab.index = tab.order.index(edge_id)
+            self._claim(tab, edge_id)
+            self._show(tab)
+
+    def _step(self, tab: _Tab, step: int) -> None:
+        with tab.lock:
+            self._move(tab, step)
+
+    def _toggle_guess(self, tab: _Tab) -> None:
+        # Setting the checkbox fires its on_update, which redraws.
+        tab.panel.show_guess.value = not tab.panel.show_guess.value  # type: ignore[misc]
+
+    def _redraw(self, tab: _Tab) -> None:
+        with tab.lock:
+            self._show(tab)
+
+    def _switch_queue(self, tab: _Tab, queue: Queue) -> None:
+        with tab.lock:
+            if queue is tab.queue:
+                return
+            tab.queue = queue
+            tab.order = order(queue, self._snapshot())
+            tab.index = -1
+            self._move(tab, +1)
+
+    # -- moving and showing --------------------------------------------------------------
+
+    def _claim(self, tab: _Tab, edge_id: str | None) -> None:
+        with self._lock:
+            for e in [e for e, c in self._claims.items() if c == tab.client.client_id]:
+                del self._claims[e]
+            if edge_id is not None:
+                self._claims[edge_id] = tab.client.client_id
+
+    def _move(self, tab: _Tab, step: int) -> None:
+        """Moves ``step`` along the queue; unlabelled queues go to the next free unlabelled edge."""
+        if tab.queue.hands_out_unlabelled and step > 0:
+            labels = self.store.label_map()
+            with self._lock:
+                n = len(tab.order)
+                start = tab.index + 1
+                candidates = [(start + k) % n for k in range(n)] if n else []
+                for i in candidates:
+                    e = tab.order[i]
+                    held = self._claims.get(e)
+                    if not labels.get(e) and held in (None, tab.client.client_id):
+                        tab.index = i
+                        break
+                else:
+                    tab.index = min(max(tab.index + 1, 0), n - 1) if n else 0
+                self._claim(tab, tab.edge_id)
+        else:
+            if tab.order:
+                tab.index = min(max(tab.index + step, 0), len(tab.order) - 1)
+            self._claim(tab, tab.edge_id)
+        self._show(tab)
+
+    def _show(self, tab: _Tab, draw_scene: bool = True) -> None:
+        edge_id = tab.edge_id
+        labels = self.store.label_map()
+        labelled = sum(1 for e in self._edge_ids if labels.get(e))
+        panel = tab.panel
+        with tab.client.atomic():
+            if edge_id is None:
+                panel.facts.content = "**This queue is empty.** Choose another queue below."
+                self._clear_scene(tab.client)
+            else:
+                edge = self._edge(edge_id)
+                use_guess = bool(panel.show_guess.value)
+                if draw_scene:
+                    self._draw(tab.client, self._views.get(edge), use_guess)
+                panel.facts.content = facts_text(
+                    edge,
+                    labels.get(edge_id, {}),
+                    self._predictions.p.get(edge_id),
+                    self._predictions.threshold,
+                    use_guess,
+                )
+            panel.progress.value = 100.0 * labelled / max(len(self._edge_ids), 1)
+            # Last: the position line changing tells a watcher that the whole edge is there.
+            panel.position.content = position_text(
+                max(tab.index, 0), len(tab.order), labelled, len(self._edge_ids), tab.queue
+            ) + (f"  \n`{edge_id}`" if edge_id else "")
+        self._prefetch(tab)
+
+    def _prefetch(self, tab: _Tab) -> None:
+        upcoming = tab.order[tab.index + 1 : tab.index + 1 + PREFETCH]
+        for edge_id in upcoming:
+            self._prefetcher.submit(self._views.get, self._edge(edge_id))
+
+    def _draw(self, client: viser.ClientHandle, view: EdgeView, use_guess: bool) -> None:
+        scene = client.scene
+        placed = view.guess if use_guess else view.estimate
+        x, y, theta = (float(v) for v in placed.pose)
+        scene.add_image(
+            "/vgm",
+            placed.heatmap_rgb,
+            render_width=view.extent,
+            render_height=view.extent,
+            format="png",
+            position=(0.0, 0.0, -0.01),
+        )
+        scene.add_point_cloud("/scans/previous", view.prev, PREV_RGB, point_size=0.06)
+        scene.add_point_cloud("/scans/current", placed.cur, CUR_RGB, point_size=0.06)
+        scene.add_frame("/poses/previous", axes_length=0.5, axes_radius=0.03)
+        scene.add_frame(
+            "/poses/current",
+            axes_length=0.5,
+            axes_radius=0.03,
+            position=(x, y, 0.02),
+            wxyz=yaw_wxyz(theta),
+        )
+        if view.reference is None:
+            scene.remove_by_name("/reference")
+        else:
+            ref, ref_points = view.reference
+            scene.add_point_cloud("/reference/scan", ref_points, REFERENCE_RGB, point_size=0.03)
+            scene.add_frame(
+                "/reference/pose",
+                axes_length=0.35,
+                axes_radius=0.02,
+                origin_color=REFERENCE_RGB,
+                position=(float(ref[0]), float(ref[1]), 0.01),
+                wxyz=yaw_wxyz(float(ref[2])),
+            )
+
+    def _clear_scene(self, client: viser.ClientHandle) -> None:
+        for name in ("/vgm", "/scans", "/poses", "/reference"):
+            client.scene.remove_by_name(name)

@@ -1,0 +1,118 @@
+"""What the studio draws for one edge, computed once and cached: arrays ready to send."""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vgm_studio.core import se2
+from vgm_studio.matching.edge_scans import EdgeScans
+from vgm_studio.matching.edges import Edge
+from vgm_studio.vgm.grid import VGMParams, pair_map
+from vgm_studio.vgm.render import CUR_BGR, PREV_BGR, heatmap
+
+PREV_RGB: tuple[int, int, int] = (int(PREV_BGR[2]), int(PREV_BGR[1]), int(PREV_BGR[0]))
+CUR_RGB: tuple[int, int, int] = (int(CUR_BGR[2]), int(CUR_BGR[1]), int(CUR_BGR[0]))
+
+
+@dataclass(frozen=True)
+class PlacedPair:
+    """The pair with the current scan placed by one pose (the estimate or the initial guess)."""
+
+    pose: NDArray[np.float64]
+    heatmap_rgb: NDArray[np.uint8]  # (size, size, 3), +y up
+    cur: NDArray[np.float32]  # (M, 3) current scan in the previous scan's frame
+
+
+@dataclass(frozen=True)
+class EdgeView:
+    """Everything drawn for one edge, in the previous scan's frame (metres, z = 0).
+
+    Attributes:
+        edge: The edge.
+        prev: (N, 3) previous scan points.
+        estimate: The pair placed by the match estimate.
+        guess: The pair placed by the initial guess.
+        reference: The current scan's reference pose and its points there, when known.
+        extent: Width of the VGM square, metres.
+    """
+
+    edge: Edge
+    prev: NDArray[np.float32]
+    estimate: PlacedPair
+    guess: PlacedPair
+    reference: tuple[NDArray[np.float64], NDArray[np.float32]] | None
+    extent: float
+
+
+def _xyz(points: NDArray[np.float64]) -> NDArray[np.float32]:
+    out = np.zeros((len(points), 3), dtype=np.float32)
+    out[:, :2] = points
+    return out
+
+
+def _placed(
+    prev: NDArray[np.float64], cur: NDArray[np.float64], pose: list[float], params: VGMParams
+) -> PlacedPair:
+    pose_arr = np.asarray(pose, dtype=np.float64)
+    vgm = pair_map(
+        prev, cur, pose_arr, size=params.size, resolution=params.resolution, sigma=params.sigma
+    )
+    # heatmap() is BGR for opencv; the browser wants RGB.
+    rgb = np.ascontiguousarray(heatmap(vgm)[..., ::-1])
+    return PlacedPair(pose_arr, rgb, _xyz(se2.transform_points(pose_arr, cur)))
+
+
+def make_view(edge: Edge, scans: EdgeScans, params: VGMParams) -> EdgeView:
+    """Reads the edge's scans and builds both placements and the reference ghost."""
+    a, b = scans.scans(edge)
+    prev, cur = a.points(), b.points()
+    reference = None
+    if edge.reference is not None:
+        ref = np.asarray(edge.reference, dtype=np.float64)
+        reference = (ref, _xyz(se2.transform_points(ref, cur)))
+    return EdgeView(
+        edge=edge,
+        prev=_xyz(prev),
+        estimate=_placed(prev, cur, edge.estimate, params),
+        guess=_placed(prev, cur, edge.guess, params),
+        reference=reference,
+        extent=params.size * params.resolution,
+    )
+
+
+def yaw_wxyz(theta: float) -> tuple[float, float, float, float]:
+    """The quaternion of a rotation by ``theta`` about +z."""
+    return (math.cos(theta / 2), 0.0, 0.0, math.sin(theta / 2))
+
+
+class ViewCache:
+    """Views of recently shown and upcoming edges; thread-safe, least recently used out."""
+
+    def __init__(self, scans: EdgeScans, params: VGMParams, capacity: int = 128) -> None:
+        self._scans = scans
+        self._params = params
+        self._capacity = capacity
+        self._views: OrderedDict[str, EdgeView] = OrderedDict()
+        self._lock = threading.Lock()
+        # Logs are read once, under this lock: two threads must not parse the same log twice.
+        self._read_lock = threading.Lock()
+
+    def get(self, edge: Edge) -> EdgeView:
+        with self._lock:
+            view = self._views.get(edge.edge_id)
+            if view is not None:
+                self._views.move_to_end(edge.edge_id)
+                return view
+        with self._read_lock:
+            view = make_view(edge, self._scans, self._params)
+        with self._lock:
+            self._views[edge.edge_id] = view
+            while len(self._views) > self._capacity:
+                self._views.popitem(last=False)
+        return view
