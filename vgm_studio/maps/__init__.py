@@ -1,0 +1,1 @@
+"""Stage 7: poses and scans → occupancy grid maps (log-odds, one ray per beam) and pictures."""
