@@ -1,0 +1,163 @@
+"""``vgm-studio slam`` end to end on a simulated office with injected false loop closures."""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rerun.chunk as rc
+
+from vgm_studio.core import se2
+from vgm_studio.datasets import open_log
+from vgm_studio.simulation.simulate import SimConfig, simulate
+from vgm_studio.tools import cmd, slam_cmd
+
+FALSE_LOOPS = 10
+
+
+def run(*args: str | Path) -> None:
+    """The command as ``vgm-studio`` runs it (registered here too while the CLI settles)."""
+    if "slam" not in {c.name for c in cmd.app.registered_commands}:
+        cmd.app.command("slam")(slam_cmd.slam)
+    cmd.main(["slam", *map(str, args)])
+
+
+def write_relations(log_path: Path, out: Path, seed: int = 0) -> Path:
+    """Freiburg relations from the simulator's TRUEPOS: short, medium and random long pairs."""
+    log = open_log(log_path)
+    ref, t = log.reference_poses(), log.timestamps
+    assert ref is not None
+    pairs = [(a, a + k) for a in range(0, len(log) - 40, 3) for k in (5, 20, 40)]
+    rng = np.random.default_rng(seed)
+    pairs += [tuple(sorted(rng.choice(len(log), 2, replace=False))) for _ in range(300)]
+    lines = []
+    for a, b in pairs:
+        d = se2.between(ref[a], ref[b])
+        lines.append(f"{t[a]:.6f} {t[b]:.6f} {d[0]:.6f} {d[1]:.6f} 0 0 0 {d[2]:.6f}")
+    out.write_text("\n".join(lines) + "\n")
+    return out
+
+
+@pytest.fixture(scope="module")
+def office(tmp_path_factory) -> tuple[Path, Path]:
+    folder = tmp_path_factory.mktemp("office")
+    log = simulate(SimConfig(preset="office", seed=1, num_beams=181, scan_spacing=0.2), folder)
+    return log, write_relations(log, folder / "office.relations")
+
+
+@pytest.fixture(scope="module")
+def runs(office, tmp_path_factory) -> dict[str, dict]:
+    """One run per validator; vgmnet's also writes maps and a recording."""
+    log, relations = office
+    out = tmp_path_factory.mktemp("runs")
+    results = {}
+    for validator in ("none", "vgmnet", "reference"):
+        extra: list[str | Path] = []
+        if validator == "vgmnet":
+            extra = ["--map-png", out / "maps", "--record", out / "run.rrd"]
+        run(
+            log,
+            "--validator", validator,
+            "--relations", relations,
+            "--inject-false-loops", str(FALSE_LOOPS),
+            "--json", out / f"{validator}.json",
+            *extra,
+        )  # fmt: skip
+        results[validator] = json.loads((out / f"{validator}.json").read_text())
+    results["_out"] = {"path": out}  # type: ignore[assignment]
+    return results
+
+
+def test_validation_rejects_injected_loops_and_lowers_the_relation_error(runs):
+    none, vgmnet, ref = runs["none"], runs["vgmnet"], runs["reference"]
+    for doc in (none, vgmnet, ref):
+        assert doc["injected_false_loops"] == FALSE_LOOPS
+        assert doc["edges_kept"] + doc["edges_rejected"] == doc["edges_total"]
+        assert set(doc["before"]) == {"trans_mean", "trans_std", "rot_mean_deg", "rot_std_deg", "n"}
+        assert doc["after"]["n"] > 1000 and doc["seconds"] > 0
+    # Without validation every false loop goes in and bends the graph by metres.
+    assert none["injected_false_loops_kept"] == FALSE_LOOPS and none["edges_rejected"] == 0
+    assert none["after"] == none["before"] and none["after"]["trans_mean"] > 1.0
+    for doc in (vgmnet, ref):
+        assert doc["injected_false_loops_kept"] == 0
+        assert doc["loops_kept"] >= 20
+        assert doc["after"]["trans_mean"] < 0.1 * none["after"]["trans_mean"]
+        assert doc["after"]["trans_mean"] < doc["odometry"]["trans_mean"]
+        assert doc["after"]["trans_mean"] < doc["before"]["trans_mean"]
+    assert ref["after"]["trans_mean"] < 0.05
+
+
+def test_maps_are_written_and_the_validated_one_is_the_sharper(runs):
+    import cv2
+
+    maps = runs["_out"]["path"] / "maps"
+    images = {
+        n: cv2.imread(str(maps / f"{n}.png"), cv2.IMREAD_GRAYSCALE)
+        for n in ("odometry", "before", "after")
+    }
+    assert all(img is not None and img.size > 100_000 for img in images.values())
+    side = cv2.imread(str(maps / "side-by-side.png"), cv2.IMREAD_GRAYSCALE)
+    assert side.shape[1] > sum(i.shape[1] for i in images.values())
+    # A bent graph scatters the scans: the map it makes sees far more of the plane.
+    known = {n: int((img != 128).sum()) for n, img in images.items()}
+    assert known["after"] < 0.7 * known["before"]
+
+
+def test_recording_reads_back_with_every_entity(runs):
+    doc = runs["vgmnet"]
+    store = rc.RrdReader(runs["_out"]["path"] / "run.rrd").stream().collect()
+    chunks = store.stream().to_chunks()
+    paths = Counter(c.entity_path for c in chunks)
+    for path in (
+        "/world/maps/odometry",
+        "/world/maps/before",
+        "/world/maps/after",
+        "/world/trajectory/after",
+        "/world/scan",
+        "/world/edges/kept",
+        "/world/edges/rejected",
+        "/inspector/vgm",
+        "/inspector/verdict",
+        "/metrics/relation_error/after/trans_mean",
+    ):
+        assert path in paths, path
+
+    def strips(path: str) -> int:
+        count = 0
+        for c in chunks:
+            if c.entity_path == path:
+                batch = c.to_record_batch()
+                if "LineStrips2D:strips" in batch.schema.names:
+                    count += sum(
+                        len(row) for row in batch.column("LineStrips2D:strips").to_pylist()
+                    )
+        return count
+
+    assert strips("/world/edges/kept") == doc["edges_kept"]
+    assert strips("/world/edges/rejected") == doc["edges_rejected"]
+    rejected_seq = doc["edges_rejected"] - (doc["loops_total"] - doc["loops_kept"])
+    images = sum(c.to_record_batch().num_rows for c in chunks if c.entity_path == "/inspector/vgm")
+    assert images == doc["loops_total"] + rejected_seq
+    maps = [c for c in chunks if c.entity_path.startswith("/world/maps/")]
+    assert any("Image:buffer" in c.to_record_batch().schema.names for c in maps)
+    assert all(c.is_static for c in maps)
+    assert "keyframe" in next(c for c in chunks if c.entity_path == "/world/scan").timeline_names
+
+
+def test_bad_inputs_end_as_one_line(office, tmp_path, capsys):
+    log, _ = office
+    bad = tmp_path / "bad.relations"
+    bad.write_text("1 2 0 0 0 0 0 0\n1 2 3\n")
+    for args, expected in (
+        ((log, "--relations", bad), f"vgm-studio: error: {bad}:2: expected 8 fields"),
+        ((log, "--validator", "score"), "vgm-studio: error: --validator score needs --model"),
+        ((tmp_path / "none.log",), f"vgm-studio: error: {tmp_path / 'none.log'}: no such file"),
+    ):
+        with pytest.raises(SystemExit) as exit_info:
+            run(*args)
+        assert exit_info.value.code == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(expected), err

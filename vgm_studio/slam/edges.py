@@ -1,0 +1,43 @@
+"""The edges a SLAM run makes: matched keyframe pairs and what validation said of them."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vgm_studio.matching.matcher import MatchResult
+
+SlamEdgeKind = Literal["sequential", "loop"]
+
+
+@dataclass
+class SlamEdge:
+    """A matched pair of keyframes.
+
+    Attributes:
+        kind: ``sequential`` (consecutive keyframes) or ``loop``.
+        a: Index of the earlier keyframe.
+        b: Index of the later keyframe.
+        guess: The pose of b in a's frame the matcher started from.
+        match: The matcher's result; ``match.estimate`` is the measurement.
+        injected: A false loop closure put in on purpose (``--inject-false-loops``).
+        p_success: The validator's p(success); NaN when it gives none.
+        kept: Validation let the edge into the graph.
+    """
+
+    kind: SlamEdgeKind
+    a: int
+    b: int
+    guess: NDArray[np.float64]
+    match: MatchResult
+    injected: bool = False
+    p_success: float = math.nan
+    kept: bool = True
+
+    @property
+    def estimate(self) -> NDArray[np.float64]:
+        return np.asarray(self.match.estimate, dtype=np.float64)

@@ -1,0 +1,150 @@
+"""A whole SLAM run: odometry, keyframes, the front end, and the `before` and `after` graphs."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vgm_studio.core import se2
+from vgm_studio.datasets.scans import ScanLog
+from vgm_studio.errors import InputError
+from vgm_studio.graph.pose_graph import GraphEdge, OptimizeResult, optimize
+from vgm_studio.matching.candidates import select_keyframes
+from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.slam.config import SlamConfig
+from vgm_studio.slam.edges import SlamEdge
+from vgm_studio.slam.frontend import FrontEnd, graph_edge, odometry_edge
+from vgm_studio.slam.odometry import scan_odometry
+from vgm_studio.slam.validation import EdgeValidator
+
+MIN_POINTS = 10
+
+
+@dataclass
+class SlamResult:
+    """What a run made.
+
+    Attributes:
+        keyframes: (K,) scan indices of the keyframes.
+        odometry: (N, 3) kiss-icp odometry of every scan.
+        edges: Every matched edge, in the order the front end made them.
+        running: (K, 3) the front end's last running estimate.
+        before: The graph with every edge, optimised.
+        after: The graph with the validated edges, optimised.
+        threshold: The model's p(success) threshold (NaN for ``none`` and ``reference``).
+        seconds: Wall time per stage.
+    """
+
+    keyframes: NDArray[np.int64]
+    odometry: NDArray[np.float64]
+    edges: list[SlamEdge]
+    running: NDArray[np.float64]
+    before: OptimizeResult
+    after: OptimizeResult
+    threshold: float = float("nan")
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def odometry_keyframes(self) -> NDArray[np.float64]:
+        return self.odometry[self.keyframes]
+
+    def scan_poses(self, keyframe_poses: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(N, 3) poses of every scan: its keyframe's pose, then odometry from there on."""
+        return scan_poses(keyframe_poses, self.keyframes, self.odometry)
+
+    @property
+    def edges_kept(self) -> int:
+        return sum(e.kept for e in self.edges)
+
+
+def scan_poses(
+    keyframe_poses: NDArray[np.float64], keyframes: NDArray[np.int64], odometry: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Carries keyframe poses to every scan with the odometry since its keyframe.
+
+    Scans before the first keyframe hang off it backwards.
+    """
+    owner = np.searchsorted(keyframes, np.arange(len(odometry)), side="right") - 1
+    owner = np.maximum(owner, 0)
+    kf_scan = keyframes[owner]
+    return se2.compose(keyframe_poses[owner], se2.between(odometry[kf_scan], odometry))
+
+
+def dense_reference(log: ScanLog, odometry: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """A reference pose for every scan, where the log gives one for only some.
+
+    Scans without one take the nearest (by index) scan that has one and the odometry between
+    them: a GMapping log keeps one scan in ~15, and over those few scans odometry is exact
+    to millimetres.
+    """
+    has = np.array([s.reference is not None for s in log.scans])
+    if not has.any():
+        return None
+    idx = np.flatnonzero(has)
+    ref = np.array([log.scans[i].reference for i in idx], dtype=np.float64)
+    scan = np.arange(len(log))
+    pos = np.searchsorted(idx, scan)
+    lo, hi = np.clip(pos - 1, 0, len(idx) - 1), np.clip(pos, 0, len(idx) - 1)
+    near = np.where(np.abs(idx[lo] - scan) <= np.abs(idx[hi] - scan), lo, hi)
+    anchor = idx[near]
+    return se2.compose(ref[near], se2.between(odometry[anchor], odometry))
+
+
+def _usable(log: ScanLog) -> NDArray[np.bool_]:
+    return np.array([len(s.points()) >= MIN_POINTS for s in log.scans])
+
+
+def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamResult:
+    """Runs the whole pipeline on a log.
+
+    Raises:
+        InputError: The log has too few usable scans, or the validator cannot be set up.
+    """
+    seconds: dict[str, float] = {}
+    usable = _usable(log)
+    if usable.sum() < 2:
+        raise InputError(
+            log.path,
+            f"has {int(usable.sum())} scan(s) with at least {MIN_POINTS} points; "
+            "SLAM needs two or more",
+        )
+    t = time.perf_counter()
+    odometry = scan_odometry(log.scans, progress=progress)
+    seconds["odometry"] = time.perf_counter() - t
+    fe = config.front_end
+    pool = np.flatnonzero(usable)
+    keyframes = pool[select_keyframes(odometry[pool], fe.keyframe_distance, fe.keyframe_angle_deg)]
+    scans = [log.scans[i] for i in keyframes]
+    reference = dense_reference(log, odometry)
+    validator = EdgeValidator(
+        config.validation, scans, None if reference is None else reference[keyframes]
+    )
+    t = time.perf_counter()
+    front = FrontEnd(scans, odometry[keyframes], ScanMatcher(), validator, fe, config.graph)
+    edges = front.run(progress)
+    seconds["front_end"] = time.perf_counter() - t
+    running = front.estimate.poses
+    t = time.perf_counter()
+    odo_kf = odometry[keyframes]
+    before = optimize(running, [graph_edge(e, config.graph) for e in edges], config.graph)
+    after_edges: list[GraphEdge] = []
+    for e in edges:
+        if e.kept:
+            after_edges.append(graph_edge(e, config.graph))
+        elif e.kind == "sequential":
+            after_edges.append(odometry_edge(e.a, e.b, odo_kf, config.graph))
+    after = optimize(running, after_edges, config.graph)
+    seconds["back_end"] = time.perf_counter() - t
+    return SlamResult(
+        keyframes=keyframes.astype(np.int64),
+        odometry=odometry,
+        edges=edges,
+        running=running,
+        before=before,
+        after=after,
+        threshold=validator.threshold,
+        seconds=seconds,
+    )

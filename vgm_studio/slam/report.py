@@ -1,0 +1,144 @@
+"""What a run tells its user: relation errors, edge counts, maps, the JSON summary."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vgm_studio.datasets.relations import MatchedRelation
+from vgm_studio.datasets.scans import ScanLog
+from vgm_studio.graph.metrics import RelationErrors, relation_errors
+from vgm_studio.maps.config import MapConfig
+from vgm_studio.maps.occupancy import OccupancyGrid, build_map
+from vgm_studio.slam.pipeline import SlamResult
+
+TRAJECTORIES = ("odometry", "before", "after")
+
+
+def keyframe_trajectories(result: SlamResult) -> dict[str, NDArray[np.float64]]:
+    """The three keyframe trajectories by name: odometry, before, after."""
+    return {
+        "odometry": result.odometry_keyframes,
+        "before": result.before.poses,
+        "after": result.after.poses,
+    }
+
+
+def run_maps(log: ScanLog, result: SlamResult, config: MapConfig) -> dict[str, OccupancyGrid]:
+    """Occupancy maps of the keyframe scans placed by each trajectory."""
+    points = [log.scans[i].points() for i in result.keyframes]
+    return {
+        name: build_map(poses, points, config)
+        for name, poses in keyframe_trajectories(result).items()
+    }
+
+
+@dataclass
+class EdgeCounts:
+    """How many edges of each kind validation kept and rejected."""
+
+    total: int
+    kept: int
+    rejected: int
+    loops: int
+    loops_kept: int
+    injected: int
+    injected_kept: int
+    gnc_rejected: dict[str, int] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, result: SlamResult) -> EdgeCounts:
+        loops = [e for e in result.edges if e.kind == "loop"]
+        injected = [e for e in loops if e.injected]
+        return cls(
+            total=len(result.edges),
+            kept=result.edges_kept,
+            rejected=len(result.edges) - result.edges_kept,
+            loops=len(loops),
+            loops_kept=sum(e.kept for e in loops),
+            injected=len(injected),
+            injected_kept=sum(e.kept for e in injected),
+        )
+
+
+def errors_of(
+    result: SlamResult, relations: Sequence[MatchedRelation]
+) -> dict[str, RelationErrors]:
+    """Relation errors of each trajectory, every scan placed by its keyframe and odometry."""
+    return {
+        name: relation_errors(result.scan_poses(poses), relations)
+        for name, poses in keyframe_trajectories(result).items()
+    }
+
+
+def summary(
+    result: SlamResult,
+    errors: dict[str, RelationErrors] | None,
+    settings: dict[str, Any],
+    seconds: float,
+) -> dict[str, Any]:
+    """The ``--json`` document."""
+    counts = EdgeCounts.of(result)
+    out: dict[str, Any] = {}
+    if errors is not None:
+        out.update({name: err.to_json() for name, err in errors.items()})
+    out.update(
+        {
+            "edges_total": counts.total,
+            "edges_kept": counts.kept,
+            "edges_rejected": counts.rejected,
+            "loops_total": counts.loops,
+            "loops_kept": counts.loops_kept,
+            "injected_false_loops": counts.injected,
+            "injected_false_loops_kept": counts.injected_kept,
+            "gnc_rejected": {
+                "before": int(np.sum(result.before.weights < 0.5)),
+                "after": int(np.sum(result.after.weights < 0.5)),
+            },
+            "keyframes": len(result.keyframes),
+            "scans": len(result.odometry),
+            "seconds": seconds,
+            "stage_seconds": result.seconds,
+            "settings": settings,
+        }
+    )
+    return _finite(out)
+
+
+def _finite(value: Any) -> Any:
+    # JSON has no NaN: a figure that could not be measured is null.
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def table(errors: dict[str, RelationErrors]) -> str:
+    """The relation errors as a plain text table."""
+    lines = [
+        f"{'trajectory':<10} {'trans mean m':>12} {'trans std m':>12} "
+        f"{'rot mean °':>11} {'rot std °':>10} {'n':>6}"
+    ]
+    for name, e in errors.items():
+        lines.append(
+            f"{name:<10} {e.trans_mean:>12.4f} {e.trans_std:>12.4f} "
+            f"{e.rot_mean_deg:>11.3f} {e.rot_std_deg:>10.3f} {e.n:>6}"
+        )
+    return "\n".join(lines)
+
+
+def edge_line(result: SlamResult) -> str:
+    c = EdgeCounts.of(result)
+    text = (
+        f"edges: {c.total} matched, {c.kept} kept, {c.rejected} rejected; "
+        f"loops: {c.loops_kept} of {c.loops} kept"
+    )
+    if c.injected:
+        text += f"; injected false loops: {c.injected_kept} of {c.injected} kept"
+    return text

@@ -1,0 +1,113 @@
+"""Edge validation: which matched pairs may enter the pose graph.
+
+``none`` keeps all; the model validators ask a trained checkpoint for p(success) in batches;
+``reference`` keeps the edges whose estimate lands on the reference relative pose.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vgm_studio.core import se2
+from vgm_studio.datasets.scans import Scan
+from vgm_studio.errors import InputError
+from vgm_studio.matching.labels import reference_label
+from vgm_studio.model.features import sample_from_scans
+from vgm_studio.slam.config import ValidationConfig
+from vgm_studio.slam.edges import SlamEdge
+
+if TYPE_CHECKING:
+    from vgm_studio.model.validator import Validator
+
+# Which checkpoints each model validator accepts.
+_MODELS = {
+    "vgmnet": ("vgmnet", "vgmnet-paper"),
+    "rgb-baseline": ("rgb-baseline",),
+    "score": ("score",),
+}
+
+
+class EdgeValidator:
+    """Sets ``p_success`` and ``kept`` of edges, a block at a time.
+
+    Args:
+        config: Which validator, its checkpoint and thresholds.
+        scans: The keyframes' scans, by keyframe index.
+        reference: (K, 3) reference poses of the keyframes (``reference`` only).
+
+    Raises:
+        InputError: The checkpoint is missing, unreadable or of another model, or
+            ``reference`` was asked for without reference poses.
+    """
+
+    def __init__(
+        self,
+        config: ValidationConfig,
+        scans: Sequence[Scan],
+        reference: NDArray[np.float64] | None = None,
+    ) -> None:
+        self.config = config
+        self._scans = scans
+        self._reference = reference
+        self.model: Validator | None = None
+        if config.validator == "reference" and reference is None:
+            raise InputError(
+                None,
+                "--validator reference needs reference poses: a log with TRUEPOS or a "
+                "corrected log, or --reference with one",
+            )
+        if config.validator in _MODELS:
+            self.model = _load(config.model, config.validator)
+
+    def __call__(self, edges: Sequence[SlamEdge]) -> None:
+        if not edges:
+            return
+        name = self.config.validator
+        if name == "none":
+            for e in edges:
+                e.kept = True
+        elif name == "reference":
+            assert self._reference is not None
+            for e in edges:
+                ref = se2.between(self._reference[e.a], self._reference[e.b])
+                e.kept = reference_label(ref, e.estimate, self.config.thresholds) == "success"
+                e.p_success = float(e.kept)
+        else:
+            assert self.model is not None
+            samples = [
+                sample_from_scans(
+                    self._scans[e.a].points(),
+                    self._scans[e.b].points(),
+                    e.estimate,
+                    e.match.figures(),
+                )
+                for e in edges
+            ]
+            p = self.model.predict_samples(samples, self.config.batch_size)
+            keep = self.model.decide(p)
+            loop = np.array([e.kind == "loop" for e in edges])
+            if self.config.loop_threshold is not None:
+                keep &= ~loop | (p >= self.config.loop_threshold)
+            for e, pe, k in zip(edges, p, keep, strict=True):
+                e.p_success, e.kept = float(pe), bool(k)
+
+    @property
+    def threshold(self) -> float:
+        return self.model.threshold if self.model is not None else math.nan
+
+
+def _load(path: Path | None, validator: str) -> Validator:
+    from vgm_studio.model.validator import Validator
+
+    if path is None:
+        raise InputError(None, f"--validator {validator} needs --model, a checkpoint of that model")
+    model = Validator.load(path)
+    if model.name not in _MODELS[validator]:
+        raise InputError(path, f"is a {model.name} checkpoint, not one for --validator {validator}")
+    return model
