@@ -128,6 +128,11 @@ class Studio:
         )
         server.scene.set_up_direction("+z")
         server.scene.world_axes.visible = False
+        # Straight down on the previous scan's origin, +x right and +y up, ±7 m in view;
+        # "Reset View" in the browser comes back here.
+        server.initial_camera.position = (0.0, -0.001, 11.0)
+        server.initial_camera.look_at = (0.0, 0.0, 0.0)
+        server.initial_camera.up = (0.0, 0.0, 1.0)
         server.on_client_connect(self._connect)
         server.on_client_disconnect(self._disconnect)
         self.server = server
@@ -171,9 +176,6 @@ class Studio:
         actions.update(self._tab_actions(tab))
         panel.queue.on_update(lambda _e: self._switch_queue(tab, Queue(panel.queue.value)))
         panel.show_guess.on_update(lambda _e: self._redraw(tab))
-        client.camera.position = (0.0, 0.0, 22.0)
-        client.camera.look_at = (0.0, 0.0, 0.0)
-        client.camera.up_direction = (0.0, 1.0, 0.0)
         with tab.lock:
             self._tabs[client.client_id] = tab
             tab.index = -1
@@ -328,8 +330,8 @@ class Studio:
             format="png",
             position=(0.0, 0.0, -0.01),
         )
-        scene.add_point_cloud("/scans/previous", view.prev, PREV_RGB, point_size=0.06)
-        scene.add_point_cloud("/scans/current", placed.cur, CUR_RGB, point_size=0.06)
+        scene.add_point_cloud("/scans/previous", view.prev, PREV_RGB, point_size=0.025)
+        scene.add_point_cloud("/scans/current", placed.cur, CUR_RGB, point_size=0.025)
         scene.add_frame("/poses/previous", axes_length=0.5, axes_radius=0.03)
         scene.add_frame(
             "/poses/current",

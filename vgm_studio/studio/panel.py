@@ -65,6 +65,10 @@ def build_panel(
         queue_dd = gui.add_dropdown("Queue", [q.value for q in Queue], initial_value=queue.value)
         annotator_text = gui.add_text("Annotator", annotator)
         note = gui.add_text("Note", "", hint="Saved with the next label, then cleared.")
+    gui.add_markdown(
+        "<small>blue: previous scan · orange: current scan · grey: current scan at its "
+        "reference pose · under them, the two VGM channels</small>"
+    )
     trainer = gui.add_markdown("")
     return Panel(position, progress, facts, queue_dd, annotator_text, note, show_guess, trainer)
 

@@ -17,7 +17,7 @@ import typer
 
 from vgm_studio.datasets import ReadOptions, open_log
 from vgm_studio.errors import InputError
-from vgm_studio.tools import model_cmds, studio_cmds
+from vgm_studio.tools import model_cmds, slam_cmd, studio_cmds
 from vgm_studio.tools.sources import report_skipped
 
 app = typer.Typer(
@@ -461,6 +461,7 @@ app.command("label")(studio_cmds.label)
 app.command("demo")(studio_cmds.demo)
 app.command("export")(studio_cmds.export)
 app.command("import")(studio_cmds.import_)
+app.command("slam")(slam_cmd.slam)
 
 
 def main(argv: list[str] | None = None) -> None:
