@@ -1,0 +1,79 @@
+"""The studio's commands: bad input stops before the server starts; labels go out and back in."""
+
+from __future__ import annotations
+
+import socket
+import sqlite3
+
+import pytest
+
+from tests.test_cli_checks import one_line_error, run
+from vgm_studio.labels import LabelStore
+from vgm_studio.matching.edges import read_edges
+from vgm_studio.studio.browser import free_port
+
+
+def test_port_in_use_is_refused_before_serving(office_edges, tmp_path):
+    with socket.socket() as holder:
+        holder.bind(("127.0.0.1", 0))
+        holder.listen()
+        port = holder.getsockname()[1]
+        proc = run("label", office_edges, "--workspace", tmp_path / "ws", "--port", port)
+    line = one_line_error(proc, 1)
+    assert f"127.0.0.1:{port}: cannot listen: the port is in use" in line
+    assert not (tmp_path / "ws").exists()  # nothing made for a server that never ran
+
+
+def test_missing_and_corrupt_sources_name_file_and_line(office_edges, tmp_path):
+    port = str(free_port())
+    missing = tmp_path / "nope.log"
+    line = one_line_error(run("label", missing, "--workspace", tmp_path / "ws", "--port", port), 1)
+    assert line.endswith(f"{missing}: no such file or folder")
+    bad = tmp_path / "bad.jsonl"
+    lines = office_edges.read_text().splitlines()
+    bad.write_text("\n".join([lines[0], lines[1][:40], *lines[2:5]]) + "\n")
+    line = one_line_error(run("label", bad, "--workspace", tmp_path / "ws2", "--port", port), 1)
+    assert f"{bad}:2: not JSON" in line
+
+
+def test_a_workspace_of_another_version_is_refused(office_edges, tmp_path):
+    LabelStore(tmp_path / "ws").close()
+    db = sqlite3.connect(tmp_path / "ws" / "labels.sqlite")
+    db.execute("UPDATE meta SET value = '7' WHERE key = 'schema'")
+    db.commit()
+    db.close()
+    proc = run("label", office_edges, "--workspace", tmp_path / "ws", "--port", free_port())
+    assert "schema 7" in one_line_error(proc, 1)
+
+
+def test_export_import_commands_round_trip(office_edges, tmp_path):
+    store = LabelStore(tmp_path / "ws")
+    store.add_edges(read_edges(office_edges))
+    ids = store.edge_ids()
+    store.label(ids[0], "ana", "success")
+    store.label(ids[4], "ben", "failure", note="door pitch")
+    store.close()
+    out = tmp_path / "labels.csv"
+    proc = run("export", "--workspace", tmp_path / "ws", "--out", out)
+    assert proc.returncode == 0 and "wrote 2 labels" in proc.stdout
+    proc = run("import", out, "--workspace", tmp_path / "other")
+    assert proc.returncode == 0, proc.stderr
+    assert "2 labels added or updated, 2 new edges" in proc.stdout
+    assert LabelStore(tmp_path / "other").labels() == LabelStore(tmp_path / "ws").labels()
+    line = one_line_error(run("export", "--workspace", tmp_path / "ws", "--out", "x.txt"), 1)
+    assert "unknown label file type '.txt'" in line
+    line = one_line_error(run("export", "--workspace", tmp_path / "none", "--out", out), 1)
+    assert "no workspace here" in line
+
+
+@pytest.mark.slow
+def test_demo_prepares_its_workspace_with_predictions(tmp_path):
+    proc = run("demo", "--workspace", tmp_path / "demo", "--no-serve")
+    assert proc.returncode == 0, proc.stderr
+    store = LabelStore(tmp_path / "demo")
+    assert store.count_edges() == 2377
+    preds = store.predictions()
+    assert preds.model is not None and preds.model.startswith("vgmnet-default.pt:")
+    assert len(preds.p) == 2377 and 0.0 < min(preds.p.values()) < max(preds.p.values()) < 1.0
+    again = run("demo", "--workspace", tmp_path / "demo", "--no-serve")
+    assert again.returncode == 0 and "2377 edges" in again.stdout
