@@ -13,7 +13,9 @@ import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import Any
 
+import numpy as np
 import viser
 
 from vgm_studio.errors import InputError
@@ -22,10 +24,17 @@ from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
 from vgm_studio.studio.panel import Panel, build_panel, facts_text, position_text
 from vgm_studio.studio.queues import Queue, Snapshot, order
-from vgm_studio.studio.view import CUR_RGB, PREV_RGB, EdgeView, ViewCache, yaw_wxyz
+from vgm_studio.studio.view import (
+    CUR_RGB,
+    PREV_RGB,
+    REFERENCE_RGB,
+    EdgeView,
+    ViewCache,
+    pose_marks,
+)
 from vgm_studio.vgm.grid import VGMParams
 
-REFERENCE_RGB = (150, 150, 150)
+_ONE_POINT = np.zeros((1, 3), dtype=np.float32)  # placeholder until an edge has a reference
 PREFETCH = 3
 
 
@@ -68,6 +77,7 @@ class _Tab:
     index: int = 0
     undo: list[tuple[int, str]] = field(default_factory=list)  # (event id, edge id)
     lock: threading.RLock = field(default_factory=threading.RLock)
+    nodes: dict[str, Any] = field(default_factory=dict)  # scene nodes, made once per tab
 
     @property
     def edge_id(self) -> str | None:
@@ -128,6 +138,9 @@ class Studio:
         )
         server.scene.set_up_direction("+z")
         server.scene.world_axes.visible = False
+        # A flat top-down view needs no shadows, and shadow passes cost the most where the
+        # browser renders without a GPU.
+        server.scene.configure_default_lights(True, cast_shadow=False)
         # Straight down on the previous scan's origin, +x right and +y up, ±7 m in view;
         # "Reset View" in the browser comes back here.
         server.initial_camera.position = (0.0, -0.001, 11.0)
@@ -293,12 +306,12 @@ class Studio:
         with tab.client.atomic():
             if edge_id is None:
                 panel.facts.content = "**This queue is empty.** Choose another queue below."
-                self._clear_scene(tab.client)
+                self._clear_scene(tab)
             else:
                 edge = self._edge(edge_id)
                 use_guess = bool(panel.show_guess.value)
                 if draw_scene:
-                    self._draw(tab.client, self._views.get(edge), use_guess)
+                    self._draw(tab, self._views.get(edge), use_guess)
                 panel.facts.content = facts_text(
                     edge,
                     labels.get(edge_id, {}),
@@ -318,42 +331,53 @@ class Studio:
         for edge_id in upcoming:
             self._prefetcher.submit(self._views.get, self._edge(edge_id))
 
-    def _draw(self, client: viser.ClientHandle, view: EdgeView, use_guess: bool) -> None:
-        scene = client.scene
-        placed = view.guess if use_guess else view.estimate
-        x, y, theta = (float(v) for v in placed.pose)
-        scene.add_image(
-            "/vgm",
-            placed.heatmap_rgb,
-            render_width=view.extent,
-            render_height=view.extent,
-            format="png",
-            position=(0.0, 0.0, -0.01),
-        )
-        scene.add_point_cloud("/scans/previous", view.prev, PREV_RGB, point_size=0.025)
-        scene.add_point_cloud("/scans/current", placed.cur, CUR_RGB, point_size=0.025)
-        scene.add_frame("/poses/previous", axes_length=0.5, axes_radius=0.03)
-        scene.add_frame(
-            "/poses/current",
-            axes_length=0.5,
-            axes_radius=0.03,
-            position=(x, y, 0.02),
-            wxyz=yaw_wxyz(theta),
-        )
-        if view.reference is None:
-            scene.remove_by_name("/reference")
-        else:
-            ref, ref_points = view.reference
-            scene.add_point_cloud("/reference/scan", ref_points, REFERENCE_RGB, point_size=0.03)
-            scene.add_frame(
-                "/reference/pose",
-                axes_length=0.35,
-                axes_radius=0.02,
-                origin_color=REFERENCE_RGB,
-                position=(float(ref[0]), float(ref[1]), 0.01),
-                wxyz=yaw_wxyz(float(ref[2])),
-            )
+    def _draw(self, tab: _Tab, view: EdgeView, use_guess: bool) -> None:
+        """Puts the edge into the tab's scene, updating the nodes made for earlier edges.
 
-    def _clear_scene(self, client: viser.ClientHandle) -> None:
-        for name in ("/vgm", "/scans", "/poses", "/reference"):
-            client.scene.remove_by_name(name)
+        Updating a node's data is much cheaper for the browser than removing and adding it
+        again: on a machine without a GPU that was most of a click's latency.
+        """
+        placed = view.guess if use_guess else view.estimate
+        nodes = tab.nodes
+        if not nodes:
+            scene = tab.client.scene
+            nodes["vgm"] = scene.add_image(
+                "/vgm",
+                placed.heatmap_rgb,
+                render_width=view.extent,
+                render_height=view.extent,
+                format="png",
+                cast_shadow=False,
+                receive_shadow=False,
+                position=(0.0, 0.0, -0.01),
+            )
+            nodes["previous"] = scene.add_point_cloud(
+                "/scans/previous", view.prev, PREV_RGB, point_size=0.025
+            )
+            nodes["current"] = scene.add_point_cloud(
+                "/scans/current", placed.cur, CUR_RGB, point_size=0.025
+            )
+            nodes["reference_scan"] = scene.add_point_cloud(
+                "/reference/scan", _ONE_POINT, REFERENCE_RGB, point_size=0.02
+            )
+            segments, colours = pose_marks(placed.pose, view.reference)
+            nodes["poses"] = scene.add_line_segments(
+                "/poses", segments, colours, thickness=4.0, thickness_units="screen"
+            )
+        else:
+            nodes["vgm"].image = placed.heatmap_rgb
+            nodes["previous"].points = view.prev
+            nodes["current"].points = placed.cur
+            nodes["poses"].points, nodes["poses"].colors = pose_marks(placed.pose, view.reference)
+        for name in ("vgm", "previous", "current", "poses"):
+            if not nodes[name].visible:
+                nodes[name].visible = True
+        has_reference = view.reference is not None
+        if nodes["reference_scan"].visible != has_reference:
+            nodes["reference_scan"].visible = has_reference
+        if view.reference is not None:
+            nodes["reference_scan"].points = view.reference[1]
+
+    def _clear_scene(self, tab: _Tab) -> None:
+        for node in tab.nodes.values():
+            node.visible = False

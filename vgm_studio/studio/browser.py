@@ -30,6 +30,10 @@ CHROMIUM_ARGS = (
     "--disable-component-update",
     "--disable-sync",
 )
+# The position line and edge id: what changes when a tab shows another edge.
+_SHOWN_JS = (
+    "() => Array.from(document.querySelectorAll('strong, code')).map(e => e.innerText).join('|')"
+)
 _POSITION = re.compile(r"^(\d+) / (\d+)$")
 
 
@@ -63,7 +67,7 @@ def studio_process(
     )
     try:
         deadline = time.monotonic() + timeout
-        lines = []
+        lines: list[str] = []
         assert proc.stdout is not None
         while time.monotonic() < deadline:
             line = proc.stdout.readline()
@@ -126,20 +130,32 @@ class StudioPage:
         text = self.page.get_by_text(re.compile(r"labelled \d+ of")).first.inner_text()
         return int(re.search(r"labelled (\d+) of", text).group(1))  # type: ignore[union-attr]
 
+    def _shown(self) -> str:
+        return str(self.page.evaluate(_SHOWN_JS))
+
+    def _wait_changed(self, before: str) -> None:
+        # Polled inside the page at every animation frame: no round trip per check.
+        self.page.wait_for_function(
+            f"before => ({_SHOWN_JS})() !== before",
+            arg=before,
+            polling="raf",
+            timeout=self.timeout_ms,
+        )
+
     def press(self, key: str) -> float:
         """Presses a hotkey and waits until the tab shows another edge; returns the seconds."""
-        before = (self.edge_id(), self.position())
+        before = self._shown()
         start = time.perf_counter()
         self.page.keyboard.press(key)
-        self.wait_for(lambda: (self.edge_id(), self.position()) != before)
+        self._wait_changed(before)
         return time.perf_counter() - start
 
     def click(self, button: str) -> float:
         """Clicks a panel button (``Success``, ``Undo``, …) and waits for the next edge."""
-        before = (self.edge_id(), self.position())
+        before = self._shown()
         start = time.perf_counter()
         self.page.get_by_role("button", name=re.compile(f"^{button}")).click()
-        self.wait_for(lambda: (self.edge_id(), self.position()) != before)
+        self._wait_changed(before)
         return time.perf_counter() - start
 
     def choose_queue(self, name: str) -> None:

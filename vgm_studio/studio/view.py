@@ -18,6 +18,7 @@ from vgm_studio.vgm.render import CUR_BGR, PREV_BGR, heatmap
 
 PREV_RGB: tuple[int, int, int] = (int(PREV_BGR[2]), int(PREV_BGR[1]), int(PREV_BGR[0]))
 CUR_RGB: tuple[int, int, int] = (int(CUR_BGR[2]), int(CUR_BGR[1]), int(CUR_BGR[0]))
+REFERENCE_RGB: tuple[int, int, int] = (150, 150, 150)
 
 
 @dataclass(frozen=True)
@@ -86,9 +87,32 @@ def make_view(edge: Edge, scans: EdgeScans, params: VGMParams) -> EdgeView:
     )
 
 
-def yaw_wxyz(theta: float) -> tuple[float, float, float, float]:
-    """The quaternion of a rotation by ``theta`` about +z."""
-    return (math.cos(theta / 2), 0.0, 0.0, math.sin(theta / 2))
+def pose_marks(
+    current: NDArray[np.float64],
+    reference: tuple[NDArray[np.float64], NDArray[np.float32]] | None,
+) -> tuple[NDArray[np.float32], NDArray[np.uint8]]:
+    """Sensor poses as line segments: x axis (heading) red, y axis green; reference grey.
+
+    One batch of segments instead of a mesh per pose: far cheaper to redraw per edge.
+
+    Returns:
+        (S, 2, 3) segment end points and (S, 2, 3) colours.
+    """
+    poses: list[tuple[NDArray[np.float64], float, tuple[int, int, int] | None]] = [
+        (np.zeros(3), 0.6, None),
+        (current, 0.6, None),
+    ]
+    if reference is not None:
+        poses.append((reference[0], 0.45, REFERENCE_RGB))
+    segments, colours = [], []
+    for pose, length, colour in poses:
+        x, y, theta = (float(v) for v in pose)
+        c, s = math.cos(theta), math.sin(theta)
+        for (dx, dy), axis_rgb in (((c, s), (230, 40, 40)), ((-s, c), (40, 200, 40))):
+            scale = length if axis_rgb[0] > 100 else length / 2
+            segments.append([[x, y, 0.03], [x + scale * dx, y + scale * dy, 0.03]])
+            colours.append([colour or axis_rgb] * 2)
+    return np.asarray(segments, dtype=np.float32), np.asarray(colours, dtype=np.uint8)
 
 
 class ViewCache:
