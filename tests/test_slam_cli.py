@@ -151,8 +151,15 @@ def test_bad_inputs_end_as_one_line(office, tmp_path, capsys):
     log, _ = office
     bad = tmp_path / "bad.relations"
     bad.write_text("1 2 0 0 0 0 0 0\n1 2 3\n")
+    elsewhere = tmp_path / "elsewhere.relations"
+    elsewhere.write_text("1000000000 1000000001 0 0 0 0 0 0\n")
+    tiny = tmp_path / "tiny.log"
+    tiny.write_text("FLASER 3 1 1 1 0 0 0 0 0 0 5 h 5\nFLASER 3 1 1 1 0 0 0 0 0 0 6 h 6\n")
     for args, expected in (
         ((log, "--relations", bad), f"vgm-studio: error: {bad}:2: expected 8 fields"),
+        ((log, "--relations", elsewhere), f"vgm-studio: error: {elsewhere}: no relation matches"),
+        ((tiny,), f"vgm-studio: error: {tiny}: has 0 scan(s) with at least 10 points"),
+        ((log, "--relations", log), f"vgm-studio: error: {log}: is not a Freiburg relations file"),
         ((log, "--validator", "score"), "vgm-studio: error: --validator score needs --model"),
         ((tmp_path / "none.log",), f"vgm-studio: error: {tmp_path / 'none.log'}: no such file"),
     ):

@@ -24,7 +24,7 @@ from vgm_studio.graph.config import GraphConfig
 from vgm_studio.graph.pose_graph import GraphEdge, RunningEstimate, edge_covariance
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.slam.config import FrontEndConfig
-from vgm_studio.slam.edges import SlamEdge
+from vgm_studio.slam.edges import SlamEdge, SlamEdgeKind
 
 Validate = Callable[[Sequence[SlamEdge]], None]
 
@@ -119,10 +119,15 @@ class FrontEnd:
         return self.edges
 
     def _match(
-        self, kind: str, a: int, b: int, guess: NDArray[np.float64], injected: bool = False
+        self,
+        kind: SlamEdgeKind,
+        a: int,
+        b: int,
+        guess: NDArray[np.float64],
+        injected: bool = False,
     ) -> SlamEdge:
         result = self.matcher.match(self.scans[a], self.scans[b], guess)
-        return SlamEdge("loop" if kind == "loop" else "sequential", a, b, guess, result, injected)
+        return SlamEdge(kind, a, b, guess, result, injected)
 
     def _sequential(self, block: range) -> None:
         odo = self.odometry

@@ -226,6 +226,11 @@ def slam(
     report_skipped(scan_log)
     matched = None
     if relations is not None:
+        if relations.is_file() and not looks_like_relations(relations):
+            raise InputError(
+                relations,
+                "is not a Freiburg relations file (t1 t2 x y z roll pitch yaw on each line)",
+            )
         matched, missed = match_relations(read_relations(relations), scan_log.timestamps)
         if not matched:
             raise InputError(relations, f"no relation matches scans of {log} by timestamp")
