@@ -71,9 +71,9 @@ def test_demo_prepares_its_workspace_with_predictions(tmp_path):
     proc = run("demo", "--workspace", tmp_path / "demo", "--no-serve")
     assert proc.returncode == 0, proc.stderr
     store = LabelStore(tmp_path / "demo")
-    assert store.count_edges() == 2377
+    assert store.count_edges() == 977
     preds = store.predictions()
     assert preds.model is not None and preds.model.startswith("vgmnet-default.pt:")
-    assert len(preds.p) == 2377 and 0.0 < min(preds.p.values()) < max(preds.p.values()) < 1.0
+    assert len(preds.p) == 977 and 0.0 < min(preds.p.values()) < max(preds.p.values()) < 1.0
     again = run("demo", "--workspace", tmp_path / "demo", "--no-serve")
-    assert again.returncode == 0 and "2377 edges" in again.stdout
+    assert again.returncode == 0 and "977 edges" in again.stdout

@@ -168,6 +168,12 @@ class StudioPage:
         self.page.mouse.click(200, 200)
 
     def screenshot(self, path: Path) -> None:
+        # The browser's own "software WebGL" notice is not the studio's: close it first.
+        closes = self.page.locator("button.mantine-Notification-closeButton").all()
+        for close in closes:
+            close.click()
+        if closes:
+            time.sleep(0.5)  # the notice slides away
         self.page.screenshot(path=str(path))
 
 

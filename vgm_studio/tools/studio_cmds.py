@@ -18,6 +18,8 @@ from vgm_studio.studio.app import Studio, StudioConfig, check_port_free, default
 PoseSource = Literal["auto", "odometry", "reference"]
 REPO = Path(__file__).resolve().parents[2]
 DEMO_LOG = REPO / "datasets" / "demo-seed0.log"
+# Enough loop candidates to label for a while, few enough that the demo serves within seconds.
+DEMO_LOOPS = 600
 DEFAULT_MODEL = REPO / "assets" / "models" / "vgmnet-default.pt"
 EXPOSED = (
     "viser has no authentication: anyone who can reach {host}:{port} can read and change "
@@ -233,7 +235,7 @@ def demo(
     if serve_app:
         check_port_free(host, port)
     store = LabelStore(workspace)
-    fill_workspace(store, DEMO_LOG, None, ReadOptions())
+    fill_workspace(store, DEMO_LOG, None, ReadOptions(), max_loops=DEMO_LOOPS)
     model = _model_path(None, False)
     if not serve_app:
         if model is not None:
