@@ -1,0 +1,226 @@
+"""The background trainer: versions, promotion, predictions, a killed trainer, export.
+
+Real SQLite, real torch training (small epochs) on a simulated office workspace whose labels
+are the edges' reference labels. The office log's matches nearly all succeed, so each
+sequential edge also appears moved by 0.6 m / 9° as a failure: a balanced set to learn from.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+import torch
+import typer
+from typer.testing import CliRunner
+
+from vgm_studio.labels.store import LabelStore
+from vgm_studio.matching.edges import Edge, edge_id, read_edges
+from vgm_studio.model import Validator
+from vgm_studio.tools import trainer_cmds
+from vgm_studio.trainer import registry
+from vgm_studio.trainer.dataset import held_out_split, majority_labels
+from vgm_studio.trainer.fit import FitConfig
+from vgm_studio.trainer.supervisor import Backoff, TrainerSupervisor
+from vgm_studio.trainer.worker import Job, TrainerConfig, Worker
+
+FAST = FitConfig(epochs=6, epoch_size=256, batch_size=16, lr=1e-2)
+
+
+def _balanced(path: Path, failures: int = 80) -> list[Edge]:
+    out = []
+    for e in read_edges(path):
+        if e.label != "success":
+            continue
+        out.append(e)
+        if e.kind == "sequential" and len(out) < 2 * failures:
+            est = [e.estimate[0] + 0.6, e.estimate[1] - 0.4, e.estimate[2] + 0.15]
+            moved = edge_id(e.log_sha256, e.a, e.b, est)
+            out.append(replace(e, edge_id=moved, estimate=est, label="failure"))
+    return out
+
+
+def _workspace(folder: Path, edges: list[Edge], labelled: int | None = None) -> LabelStore:
+    store = LabelStore(folder)
+    store.add_edges(edges)
+    for e in edges[:labelled]:
+        assert e.label is not None
+        store.label(e.edge_id, "bot", e.label)
+    return store
+
+
+@pytest.fixture(autouse=True)
+def _keep_torch_threads():
+    """The worker sets torch's thread count for its process; give the test process its own back."""
+    threads = torch.get_num_threads()
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="module")
+def edges(office_edges) -> list[Edge]:
+    return _balanced(office_edges)
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory, edges) -> Path:
+    """A workspace with every edge labelled and one version trained in-process."""
+    folder = tmp_path_factory.mktemp("trained") / "ws"
+    store = _workspace(folder, edges)
+    store.set_predictions("before", {e.edge_id: 0.5 for e in edges}, 0.5)
+    store.close()
+    worker = Worker(folder, TrainerConfig(nice=0, fit=FAST), log=lambda _s: None)
+    assert worker.cycle(Job(from_scratch=False, request=0)) == 1
+    worker.store.close()
+    return folder
+
+
+def _copy(folder: Path, tmp_path: Path) -> Path:
+    target = tmp_path / "ws"
+    shutil.copytree(folder, target)
+    return target
+
+
+def test_a_version_is_registered_promoted_and_changes_the_predictions(trained, edges):
+    store = LabelStore(trained, create=False)
+    [v1] = registry.list_models(store)
+    assert (v1.version, v1.promoted, v1.active) == (1, True, True)
+    assert v1.path == trained / "models" / "v1.pt" and v1.path.is_file()
+    assert v1.labels_seen == len(edges)
+    assert v1.metrics["accuracy"] >= 0.85 and v1.metrics["compared"]["against"] == "before"
+    predictions = store.predictions()
+    assert predictions.model == "v1" and predictions.threshold == v1.metrics["threshold"]
+    assert set(predictions.p) == {e.edge_id for e in edges}
+    assert len(set(predictions.p.values())) > 1  # not the 0.5 everywhere it replaced
+    status = registry.trainer_status(store)
+    assert (status.active_version, status.labels_since, status.state) == (1, 0, "idle")
+    assert status.metrics["accuracy"] == v1.metrics["accuracy"]
+
+
+def test_a_worse_version_is_registered_but_not_promoted(trained, tmp_path):
+    folder = _copy(trained, tmp_path)
+    before = LabelStore(folder, create=False).predictions()
+    # A learning rate of ~0 from scratch: a network no better than its random start.
+    bad = TrainerConfig(nice=0, fit=replace(FAST, lr=1e-9, epochs=1, epoch_size=32))
+    worker = Worker(folder, bad, log=lambda _s: None)
+    assert worker.cycle(Job(from_scratch=True, request=registry.request_training(worker.store)))
+    v1, v2 = registry.list_models(worker.store)
+    assert (v2.promoted, v2.active, v1.active) == (False, False, True)
+    assert v2.metrics["compared"]["active_accuracy"] > v2.metrics["compared"]["accuracy"]
+    assert v2.path.is_file()
+    assert worker.store.predictions() == before
+    assert registry.active_version(worker.store) == 1
+    assert not registry.trainer_status(worker.store).pending_request
+
+
+def test_models_lists_versions_and_exports_a_checkpoint_eval_accepts(trained, tmp_path, edges):
+    app = typer.Typer()
+    app.command()(trainer_cmds.models)
+    runner = CliRunner()
+    listed = runner.invoke(app, ["--workspace", str(trained)])
+    assert listed.exit_code == 0, listed.output
+    assert "v1" in listed.output and "active" in listed.output
+    out = tmp_path / "exported.pt"
+    done = runner.invoke(app, ["--workspace", str(trained), "--export", "1", "--out", str(out)])
+    assert done.exit_code == 0, done.output
+    validator = Validator.load(out, device="cpu")
+    p = validator.predict(edges[:8])
+    assert p.shape == (8,)
+    missing = runner.invoke(app, ["--workspace", str(trained), "--export", "9", "--out", str(out)])
+    assert missing.exit_code == 1 and "no version v9" in str(missing.exception)
+
+
+def test_register_is_all_or_nothing_and_orphans_are_removed(tmp_path, edges, monkeypatch):
+    store = _workspace(tmp_path / "ws", edges[:10], labelled=0)
+    store.set_predictions("before", {e.edge_id: 0.3 for e in edges[:10]})
+    pending = tmp_path / "ws" / "models" / ".pending-x.pt"
+    pending.parent.mkdir()
+    pending.write_bytes(b"a whole checkpoint")
+
+    def die(*_args, **_kwargs):
+        raise KeyboardInterrupt  # the process stopped between the rename and the commit
+
+    monkeypatch.setattr(store, "set_predictions", die)
+    with pytest.raises(KeyboardInterrupt):
+        registry.register_model(store, pending, {}, 10, 1.0, True, {e.edge_id: 0.9 for e in edges})
+    assert registry.list_models(store) == []
+    assert store.predictions().model == "before"
+    assert registry.remove_orphans(store) == [tmp_path / "ws" / "models" / "v1.pt"]
+    assert list((tmp_path / "ws" / "models").iterdir()) == []
+
+
+def test_held_out_edges_stay_held_out_and_each_class_keeps_its_share(tmp_path, edges):
+    store = _workspace(tmp_path / "ws", edges, labelled=100)
+    labels = majority_labels(store)
+    first = held_out_split(store, labels, {}, 0.2)
+    for e in edges[100:]:
+        assert e.label is not None
+        store.label(e.edge_id, "bot", e.label)
+    labels = majority_labels(store)
+    second = held_out_split(store, labels, {}, 0.2)
+    assert first <= second
+    for y in (True, False):
+        members = [e for e, v in labels.items() if v is y]
+        share = sum(e in second for e in members) / len(members)
+        assert abs(share - 0.2) < 0.02
+    # Two annotators who disagree leave the edge out; a majority decides it.
+    tie, vote = edges[0].edge_id, edges[1].edge_id
+    store.label(tie, "ana", "failure")
+    store.label(vote, "ana", "success")
+    store.label(vote, "ben", "success")
+    labels = majority_labels(store)
+    assert tie not in labels and labels[vote] is True
+
+
+def _wait(condition, timeout: float, what: str):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = condition()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def test_a_killed_trainer_leaves_the_store_consistent_and_is_restarted(tmp_path, edges):
+    folder = tmp_path / "ws"
+    store = _workspace(folder, edges[:120])
+    store.set_predictions("before", {e.edge_id: 0.5 for e in edges[:120]}, 0.5)
+    before = store.predictions()
+    supervisor = TrainerSupervisor(
+        folder,
+        retrain_every=25,
+        extra_args=["--epochs", "8", "--epoch-size", "128"],
+        backoff=Backoff(first=0.2),
+    )
+    supervisor.start()
+    try:
+
+        def training() -> registry.TrainerStatus | None:
+            status = registry.trainer_status(store)
+            return status if status.state == "training" and status.epoch >= 1 else None
+
+        status = _wait(training, 60, "the trainer to train")
+        assert status.epochs == 8
+        killed = supervisor.pid
+        assert killed is not None
+        os.kill(killed, signal.SIGKILL)
+        _wait(lambda: supervisor.pid not in (None, killed), 30, "a restarted trainer")
+        # Killed mid-training: no version, no file left behind that a row would name, and
+        # the predictions the app shows are the ones from before.
+        for m in registry.list_models(store):
+            assert m.path.is_file()
+        assert store.predictions() == before
+        assert supervisor.restarts == 1
+        _wait(lambda: registry.active_version(store) == 1, 90, "the restarted trainer's v1")
+        assert store.predictions().model == "v1"
+        assert registry.list_models(store)[0].path.is_file()
+    finally:
+        supervisor.stop()
+    assert registry.trainer_status(store).state == "stopped"
+    assert "restarting" in supervisor.log_path.read_text()
