@@ -19,11 +19,12 @@ import torch
 import typer
 from typer.testing import CliRunner
 
+from vgm_studio.errors import InputError
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.matching.edges import Edge, edge_id, read_edges
 from vgm_studio.model import Validator
 from vgm_studio.tools import trainer_cmds
-from vgm_studio.trainer import registry
+from vgm_studio.trainer import PromotionWatcher, registry
 from vgm_studio.trainer.dataset import held_out_split, majority_labels
 from vgm_studio.trainer.fit import FitConfig
 from vgm_studio.trainer.supervisor import Backoff, TrainerSupervisor
@@ -224,3 +225,33 @@ def test_a_killed_trainer_leaves_the_store_consistent_and_is_restarted(tmp_path,
         supervisor.stop()
     assert registry.trainer_status(store).state == "stopped"
     assert "restarting" in supervisor.log_path.read_text()
+
+
+def test_one_trainer_per_workspace_and_the_app_hears_of_promotions(trained, tmp_path):
+    folder = _copy(trained, tmp_path)
+    first = Worker(folder, TrainerConfig(nice=0), log=lambda _s: None)
+    with pytest.raises(InputError, match="another trainer"):
+        Worker(folder, TrainerConfig(nice=0), log=lambda _s: None)
+    first.store.close()
+    store = LabelStore(folder, create=False)
+    heard: list[str] = []
+    statuses: list[registry.TrainerStatus] = []
+    watcher = PromotionWatcher(store, heard.append, statuses.append)
+    watcher.poll()
+    assert heard == [] and statuses[-1].active_version == 1
+    store.set_predictions("v7", {}, 0.5)
+    watcher.poll()
+    watcher.poll()
+    assert heard == ["v7"]
+
+
+def test_the_supervisor_never_raises_and_backs_off(tmp_path):
+    # No store there: every trainer it starts exits at once with a one-line error.
+    supervisor = TrainerSupervisor(tmp_path / "nothing", backoff=Backoff(first=0.1, longest=0.4))
+    (tmp_path / "nothing").mkdir()
+    supervisor.start()
+    _wait(lambda: supervisor.restarts >= 2, 60, "two restarts")
+    supervisor.stop()
+    log = supervisor.log_path.read_text()
+    assert "no workspace here" in log and "restarting in 0.2 s" in log
+    assert Backoff().pause(1) == 1.0 and Backoff().pause(10) == 60.0

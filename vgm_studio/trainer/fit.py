@@ -52,10 +52,12 @@ class FitConfig:
         vgm: VGM parameters.
     """
 
+    # Measured on simulated corridor loops, 25 to 300 labels (docs/trainer-benchmarks.md):
+    # small batches and a lower peak rate than ``vgm-studio train`` learn more from few labels.
     epochs: int = 12
     epoch_size: int = 1024
-    batch_size: int = 32
-    lr: float = 2e-3
+    batch_size: int = 16
+    lr: float = 3e-3
     weight_decay: float = 1e-4
     patience: int = 4
     augment: bool = True
