@@ -255,3 +255,18 @@ def test_the_supervisor_never_raises_and_backs_off(tmp_path):
     log = supervisor.log_path.read_text()
     assert "no workspace here" in log and "restarting in 0.2 s" in log
     assert Backoff().pause(1) == 1.0 and Backoff().pause(10) == 60.0
+
+
+def test_a_trainer_that_fails_says_why(trained, tmp_path, monkeypatch):
+    folder = _copy(trained, tmp_path)
+    worker = Worker(folder, TrainerConfig(nice=0), log=lambda _s: None)
+
+    def boom(_job):
+        raise RuntimeError("out of memory")
+
+    monkeypatch.setattr(worker, "due", lambda: Job(False, 0))
+    monkeypatch.setattr(worker, "cycle", boom)
+    with pytest.raises(RuntimeError):
+        worker.run()
+    status = registry.trainer_status(worker.store)
+    assert (status.state, status.message) == ("crashed", "RuntimeError: out of memory")

@@ -154,10 +154,14 @@ class TrainerSupervisor:
         """Tells the app (through the store) that the trainer died; never raises."""
         self._note(f"supervisor: {message}")
         try:
-            from vgm_studio.trainer.registry import report
+            from vgm_studio.trainer.registry import read_state, report
 
             store = LabelStore(self.workspace, create=False)
             try:
+                last = read_state(store)
+                if last.get("state") == "crashed":  # the trainer said why: keep its words
+                    reason = last.get("message", "").split("; trainer exited")[0]
+                    message = f"{reason}; {message}" if reason else message
                 report(store, "crashed", message=message)
             finally:
                 store.close()

@@ -103,6 +103,8 @@ class Worker:
         _be_polite(self.config)
         registry.report(self.store, "idle", message="watching the labels", pid=os.getpid())
         done = 0
+        state: registry.State = "stopped"
+        message = "trainer stopped"
         try:
             while cycles is None or done < cycles:
                 self._check_parent()
@@ -112,8 +114,11 @@ class Worker:
                     continue
                 self.cycle(job)
                 done += 1
+        except Exception as exc:  # say why in the app before the process goes
+            state, message = "crashed", f"{type(exc).__name__}: {exc}"
+            raise
         finally:
-            registry.report(self.store, "stopped", message="trainer stopped")
+            registry.report(self.store, state, message=message)
 
     def _check_parent(self) -> None:
         """A trainer whose app died stops instead of training for nobody."""
