@@ -344,12 +344,12 @@ class Studio:
             nodes["vgm"] = scene.add_image(
                 "/vgm",
                 placed.heatmap_rgb,
-                render_width=view.extent,
-                render_height=view.extent,
+                render_width=placed.heatmap_size[0],
+                render_height=placed.heatmap_size[1],
                 format="png",
                 cast_shadow=False,
                 receive_shadow=False,
-                position=(0.0, 0.0, -0.01),
+                position=(*placed.heatmap_centre, -0.01),
             )
             nodes["previous"] = scene.add_point_cloud(
                 "/scans/previous", view.prev, PREV_RGB, point_size=0.025
@@ -365,7 +365,10 @@ class Studio:
                 "/poses", segments, colours, thickness=4.0, thickness_units="screen"
             )
         else:
-            nodes["vgm"].image = placed.heatmap_rgb
+            image = nodes["vgm"]
+            image.image = placed.heatmap_rgb
+            image.render_width, image.render_height = placed.heatmap_size
+            image.position = (*placed.heatmap_centre, -0.01)
             nodes["previous"].points = view.prev
             nodes["current"].points = placed.cur
             nodes["poses"].points, nodes["poses"].colors = pose_marks(placed.pose, view.reference)

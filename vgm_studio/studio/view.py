@@ -26,8 +26,17 @@ class PlacedPair:
     """The pair with the current scan placed by one pose (the estimate or the initial guess)."""
 
     pose: NDArray[np.float64]
-    heatmap_rgb: NDArray[np.uint8]  # (size, size, 3), +y up
+    heatmap_rgb: NDArray[np.uint8]  # (h, w, 3) RGB, row i along +y: the occupied part of the VGM
+    heatmap_centre: tuple[float, float]  # where the crop's centre lies, metres
     cur: NDArray[np.float32]  # (M, 3) current scan in the previous scan's frame
+
+    @property
+    def heatmap_size(self) -> tuple[float, float]:
+        """(width, height) of the crop in metres."""
+        h, w = self.heatmap_rgb.shape[:2]
+        return w * self._resolution, h * self._resolution
+
+    _resolution: float = 0.05
 
 
 @dataclass(frozen=True)
@@ -64,9 +73,34 @@ def _placed(
     vgm = pair_map(
         prev, cur, pose_arr, size=params.size, resolution=params.resolution, sigma=params.sigma
     )
-    # heatmap() is BGR for opencv; the browser wants RGB.
-    rgb = np.ascontiguousarray(heatmap(vgm)[..., ::-1])
-    return PlacedPair(pose_arr, rgb, _xyz(se2.transform_points(pose_arr, cur)))
+    # heatmap() is BGR with +y up for opencv; viser wants RGB with row 0 at its -y edge.
+    rgb = heatmap(vgm)[::-1, :, ::-1]
+    crop, centre = _crop(rgb, vgm, params.resolution)
+    return PlacedPair(
+        pose_arr, crop, centre, _xyz(se2.transform_points(pose_arr, cur)), params.resolution
+    )
+
+
+def _crop(
+    rgb: NDArray[np.uint8], vgm: NDArray[np.float32], resolution: float, margin: int = 10
+) -> tuple[NDArray[np.uint8], tuple[float, float]]:
+    """The heatmap cut down to its occupied cells and a margin, and where its centre lies.
+
+    The browser pays for every screen pixel an image covers, and without a GPU a 20 m square
+    under a 10 m scan was most of a click's latency; the empty rest is background anyway.
+    """
+    occupied = (vgm[0] > 0) | (vgm[1] > 0)
+    size = occupied.shape[0]
+    if not occupied.any():
+        return np.ascontiguousarray(rgb[:1, :1]), (0.0, 0.0)
+    rows = np.flatnonzero(occupied.any(axis=1))  # rows run along +y in the VGM
+    cols = np.flatnonzero(occupied.any(axis=0))
+    r0, r1 = max(rows[0] - margin, 0), min(rows[-1] + margin + 1, size)
+    c0, c1 = max(cols[0] - margin, 0), min(cols[-1] + margin + 1, size)
+    crop = np.ascontiguousarray(rgb[r0:r1, c0:c1])
+    half = size / 2
+    centre = ((c0 + c1) / 2 - half) * resolution, ((r0 + r1) / 2 - half) * resolution
+    return crop, (float(centre[0]), float(centre[1]))
 
 
 def make_view(edge: Edge, scans: EdgeScans, params: VGMParams) -> EdgeView:
