@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from vgm_studio.labels import LabelStore
 from vgm_studio.matching.edges import read_edges
 from vgm_studio.studio.browser import StudioPage, chromium, chromium_path, free_port, studio_process
 
@@ -35,7 +36,10 @@ def _labels(workspace: Path) -> list[tuple[str, str, str]]:
 
 
 def _label_args(edges: Path, workspace: Path) -> list[str]:
-    return ["label", str(edges), "--workspace", str(workspace), "--no-model", "--annotator", "ana"]
+    return [
+        *("label", str(edges), "--workspace", str(workspace)),
+        *("--no-model", "--no-trainer", "--annotator", "ana"),
+    ]
 
 
 def test_label_click_hotkey_undo_queue_and_reload(office_edges, tmp_path, artifacts):
@@ -121,3 +125,27 @@ def test_labels_survive_a_kill(office_edges, tmp_path):
             tab = StudioPage(browser.new_page(), f"http://127.0.0.1:{port}")
             assert tab.labelled() == 5
             assert tab.edge_id() not in shown
+
+
+def test_the_trainer_learns_from_labels_and_the_tab_shows_its_model(office_edges, tmp_path):
+    edges = read_edges(office_edges)
+    ws = tmp_path / "ws"
+    port = free_port()
+    args = [*_label_args(office_edges, ws), "--retrain-every", "12"]
+    args.remove("--no-trainer")
+    with studio_process(args, port), chromium() as browser:
+        tab = StudioPage(browser.new_page(), f"http://127.0.0.1:{port}")
+        for i in range(24):
+            # Both classes, whatever the edges are: this checks the loop, not the labels.
+            tab.press("sf"[i % 2])
+        tab.wait_for(lambda: "model v1" in tab.trainer(), 120)
+        tab.wait_for(
+            lambda: (
+                "p(success)" in tab.page.inner_text("body")
+                and "no model" not in tab.page.inner_text("body")
+            ),
+            30,
+        )
+        preds = LabelStore(ws).predictions()
+        assert preds.model == "v1" and len(preds.p) == len(edges)
+        tab.screenshot(tmp_path / "trained.png")

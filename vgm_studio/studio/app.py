@@ -122,7 +122,9 @@ class Studio:
         self._lock = threading.RLock()
         self._prefetcher = ThreadPoolExecutor(max_workers=1, thread_name_prefix="prefetch")
         self.server: viser.ViserServer | None = None
-        self.on_label: list[Callable[[], None]] = []
+        # Set by whoever runs a trainer beside the studio ("Train now" in the panel).
+        self.train_now: Callable[[], None] | None = None
+        self._trainer_text = ""
 
     @property
     def url(self) -> str:
@@ -159,11 +161,40 @@ class Studio:
     # -- predictions ---------------------------------------------------------------------
 
     def refresh_predictions(self) -> None:
-        """Rereads the active model's predictions from the store and redraws every tab."""
+        """Rereads the active model's predictions and shows them in every tab.
+
+        Tabs in a queue ordered by the model are reordered; the edge a tab shows stays in
+        front, so nobody is yanked away from the edge they are looking at.
+        """
         self._predictions = self.store.predictions()
         for tab in list(self._tabs.values()):
             with tab.lock:
+                if tab.queue in (Queue.uncertain, Queue.disagree):
+                    current = tab.edge_id
+                    fresh = order(tab.queue, self._snapshot())
+                    if current is not None:
+                        fresh = [current, *(e for e in fresh if e != current)]
+                    tab.order, tab.index = fresh, 0
                 self._show(tab, draw_scene=False)
+
+    def show_trainer(self, text: str) -> None:
+        """Shows the background trainer's state in every tab (called from the watcher)."""
+        if text == self._trainer_text:
+            return
+        self._trainer_text = text
+        for tab in list(self._tabs.values()):
+            tab.panel.trainer.content = text
+
+    def _train_now(self, tab: _Tab) -> None:
+        if self.train_now is None:
+            tab.client.add_notification(
+                "No trainer", "This studio runs without one.", auto_close_seconds=3.0
+            )
+            return
+        self.train_now()
+        tab.client.add_notification(
+            "Training asked for", "The trainer starts a new version.", auto_close_seconds=3.0
+        )
 
     # -- tabs ----------------------------------------------------------------------------
 
@@ -180,11 +211,13 @@ class Studio:
             "previous": lambda: self._step(tab, -1),
             "next": lambda: self._step(tab, +1),
             "guess": lambda: self._toggle_guess(tab),
+            "train_now": lambda: self._train_now(tab),
         }
 
     def _connect(self, client: viser.ClientHandle) -> None:
         actions: dict[str, Callable[[], None]] = {}
         panel = build_panel(client, self.config.annotator, self.config.queue, actions)
+        panel.trainer.content = self._trainer_text
         tab = _Tab(client, panel, self.config.queue, order(self.config.queue, self._snapshot()))
         actions.update(self._tab_actions(tab))
         panel.queue.on_update(lambda _e: self._switch_queue(tab, Queue(panel.queue.value)))
@@ -218,8 +251,6 @@ class Studio:
             tab.undo.append((event.id, edge_id))
             tab.panel.note.value = ""  # type: ignore[misc]  # viser's setter, unseen by mypy
             self._move(tab, +1)
-        for callback in self.on_label:
-            callback()
 
     def _skip(self, tab: _Tab) -> None:
         with tab.lock:

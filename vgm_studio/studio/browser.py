@@ -130,6 +130,11 @@ class StudioPage:
         text = self.page.get_by_text(re.compile(r"labelled \d+ of")).first.inner_text()
         return int(re.search(r"labelled (\d+) of", text).group(1))  # type: ignore[union-attr]
 
+    def trainer(self) -> str:
+        """The trainer's lines in the panel ("" while the studio runs none)."""
+        lines = self.page.locator("p").filter(has_text="Trainer:")
+        return str(lines.first.inner_text()) if lines.count() else ""
+
     def _shown(self) -> str:
         return str(self.page.evaluate(_SHOWN_JS))
 

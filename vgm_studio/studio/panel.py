@@ -70,6 +70,8 @@ def build_panel(
         "reference pose · under them, the two VGM channels</small>"
     )
     trainer = gui.add_markdown("")
+    train_now = gui.add_button("Train now", hint="Ask the background trainer for a new version.")
+    train_now.on_click(_caller(actions, "train_now"))
     return Panel(position, progress, facts, queue_dd, annotator_text, note, show_guess, trainer)
 
 
@@ -80,6 +82,23 @@ def _caller(actions: dict[str, Callable[[], None]], action: str) -> Callable[[An
         actions[action]()
 
     return call
+
+
+def trainer_text(status: Any) -> str:
+    """The background trainer's state in two lines (``status`` is a ``TrainerStatus``)."""
+    state = status.state
+    if state == "training" and status.epochs:
+        state = f"training, epoch {status.epoch} of {status.epochs}"
+    active = f"v{status.active_version}" if status.active_version is not None else "none yet"
+    m = status.metrics
+    figures = ""
+    if m.get("accuracy") is not None:
+        figures = " · held-out acc {:.2f}, F1 {:.2f}".format(m["accuracy"], m.get("f1") or 0.0)
+    pending = " · Train now asked" if status.pending_request else ""
+    return (
+        f"**Trainer:** {state}{pending}  \nmodel {active}{figures} · "
+        f"{status.labels_since} labels since"
+    )
 
 
 def position_text(index: int, total: int, labelled: int, edges: int, queue: Queue) -> str:

@@ -17,7 +17,7 @@ import typer
 
 from vgm_studio.datasets import ReadOptions, open_log
 from vgm_studio.errors import InputError
-from vgm_studio.tools import model_cmds, slam_cmd, studio_cmds
+from vgm_studio.tools import model_cmds, slam_cmd, studio_cmds, trainer_cmds
 from vgm_studio.tools.sources import report_skipped
 
 app = typer.Typer(
@@ -462,6 +462,8 @@ app.command("demo")(studio_cmds.demo)
 app.command("export")(studio_cmds.export)
 app.command("import")(studio_cmds.import_)
 app.command("slam")(slam_cmd.slam)
+app.command("trainer")(trainer_cmds.trainer)
+app.command("models")(trainer_cmds.models)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Literal, cast
 
@@ -82,7 +84,10 @@ def fill_workspace(
 def predict_workspace(store: LabelStore, model: Path, progress: bool = True) -> None:
     """Stores the model's p(success) for every edge, unless this model's are there already."""
     from vgm_studio.model import Validator
+    from vgm_studio.trainer import list_models
 
+    if list_models(store):
+        return  # the workspace's own trainer has versions: the active one stays in use
     key = f"{model.name}:{file_hash(model)[:12]}"
     current = store.predictions()
     if current.model == key and len(current.p) == store.count_edges():
@@ -97,20 +102,61 @@ def predict_workspace(store: LabelStore, model: Path, progress: bool = True) -> 
     )
 
 
+@dataclass
+class TrainerOptions:
+    """The background trainer beside the studio (see ``vgm_studio.trainer``)."""
+
+    retrain_every: int = 25
+    base: list[Path] = field(default_factory=list)
+
+
+def _start_trainer(studio: Studio, options: TrainerOptions) -> Callable[[], None]:
+    """Starts the trainer process and the watcher that brings its versions to the app.
+
+    Returns:
+        A function that stops both.
+    """
+    from vgm_studio.studio.panel import trainer_text
+    from vgm_studio.trainer import PromotionWatcher, TrainerSupervisor, request_training
+
+    store = studio.store
+    supervisor = TrainerSupervisor(store.workspace, options.retrain_every, options.base)
+    watcher = PromotionWatcher(
+        store,
+        on_promote=lambda _name: studio.refresh_predictions(),
+        on_status=lambda status: studio.show_trainer(trainer_text(status)),
+    )
+
+    def train_now() -> None:
+        request_training(store)
+
+    studio.train_now = train_now
+    supervisor.start()
+    watcher.start()
+
+    def stop() -> None:
+        watcher.stop()
+        supervisor.stop()
+
+    return stop
+
+
 def serve(
     store: LabelStore,
     config: StudioConfig,
     *,
     model: Path | None = None,
+    trainer: TrainerOptions | None = None,
     ready_seconds: float | None = None,
 ) -> None:
-    """Starts the studio, says where, and serves until Ctrl-C.
+    """Starts the studio (and the trainer beside it), says where, and serves until Ctrl-C.
 
     The model's predictions are made in the background: the annotator can start at once, and
     p(success) appears in the panel when they are ready.
     """
     studio = Studio(store, config)
     studio.start()
+    stop_trainer = _start_trainer(studio, trainer) if trainer is not None else None
     if model is not None:
         threading.Thread(
             target=_predict_then_refresh, args=(studio, model), daemon=True, name="predict"
@@ -127,6 +173,8 @@ def serve(
     except KeyboardInterrupt:
         typer.echo("stopped; labels are in " + str(store.path))
     finally:
+        if stop_trainer is not None:
+            stop_trainer()
         studio.stop()
         store.close()
 
@@ -140,6 +188,16 @@ WorkspaceOpt = Annotated[
 PortOpt = Annotated[int, typer.Option(help="TCP port.", min=1, max=65535)]
 HostOpt = Annotated[
     str, typer.Option(help="Interface to listen on; anything but 127.0.0.1 exposes the labels.")
+]
+NoTrainerOpt = Annotated[
+    bool, typer.Option("--no-trainer", help="Run no background trainer beside the studio.")
+]
+RetrainOpt = Annotated[
+    int, typer.Option(help="The trainer trains after this many new labels.", min=1)
+]
+BaseOpt = Annotated[
+    list[Path] | None,
+    typer.Option("--base", metavar="EDGES.jsonl", help="Labelled edges the trainer also uses."),
 ]
 AnnotatorOpt = Annotated[
     str | None, typer.Option(help="Your name on the labels.", show_default="your login")
@@ -168,6 +226,9 @@ def label(
         ),
     ] = None,
     no_model: Annotated[bool, typer.Option(help="Show no model predictions.")] = False,
+    no_trainer: NoTrainerOpt = False,
+    retrain_every: RetrainOpt = 25,
+    base: BaseOpt = None,
     max_loops: Annotated[int, typer.Option("--max", help="Loop candidates at most.", min=1)] = 2000,
     time_offset: Annotated[
         float, typer.Option(help="Seconds added to a reference log's timestamps.")
@@ -184,8 +245,23 @@ def label(
     options = ReadOptions(poses=cast(PoseSource, poses), skip_bad_lines=skip_bad_lines)
     fill_workspace(store, source, reference, options, max_loops, time_offset)
     model_path = _model_path(model, no_model)
+    trainer = _trainer_options(no_trainer, retrain_every, base)
     config = StudioConfig(host=host, port=port, annotator=annotator or default_annotator())
-    serve(store, config, model=model_path, ready_seconds=time.perf_counter() - start)
+    serve(
+        store, config, model=model_path, trainer=trainer, ready_seconds=time.perf_counter() - start
+    )
+
+
+def _trainer_options(
+    no_trainer: bool, retrain_every: int, base: list[Path] | None
+) -> TrainerOptions | None:
+    """Checks the trainer's options now: a base file missing would crash it over and over."""
+    if no_trainer:
+        return None
+    for path in base or []:
+        if not path.is_file():
+            raise InputError(path, "no such --base edges file")
+    return TrainerOptions(retrain_every, [p.resolve() for p in base or []])
 
 
 def _predict_then_refresh(studio: Studio, model: Path) -> None:
@@ -223,6 +299,8 @@ def demo(
     serve_app: Annotated[
         bool, typer.Option("--serve/--no-serve", help="Serve the studio (else prepare and exit).")
     ] = True,
+    no_trainer: NoTrainerOpt = False,
+    retrain_every: RetrainOpt = 25,
 ) -> None:
     """Label the bundled demo log in the browser, with the bundled model's predictions."""
     start = time.perf_counter()
@@ -244,8 +322,9 @@ def demo(
         typer.echo(f"workspace {workspace} ready: {store.count_edges()} edges ({seconds:.1f} s)")
         store.close()
         return
+    trainer = _trainer_options(no_trainer, retrain_every, None)
     config = StudioConfig(host=host, port=port, annotator=annotator or default_annotator())
-    serve(store, config, model=model, ready_seconds=time.perf_counter() - start)
+    serve(store, config, model=model, trainer=trainer, ready_seconds=time.perf_counter() - start)
 
 
 def export(
