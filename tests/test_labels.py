@@ -134,3 +134,22 @@ def test_a_bad_import_line_names_file_and_line_and_changes_nothing(store, tmp_pa
     txt.write_text(line + "\n")
     with pytest.raises(InputError, match=r"unknown label file type '\.txt'"):
         import_labels(fresh, txt)
+
+
+def test_a_snapshot_read_does_not_wait_for_another_process_writing(store):
+    import time
+
+    # Another process (the trainer) holds the write lock, mid-way through storing a version.
+    writer = sqlite3.connect(store.path, isolation_level=None)
+    writer.execute("BEGIN IMMEDIATE")
+    writer.execute("INSERT INTO meta VALUES ('pending', 'x')")
+    start = time.perf_counter()
+    with store.snapshot() as db:
+        count = db.execute("SELECT COUNT(*) FROM edges").fetchone()[0]
+        pending = db.execute("SELECT 1 FROM meta WHERE key = 'pending'").fetchone()
+    assert time.perf_counter() - start < 0.5
+    assert count == store.count_edges() > 0 and pending is None  # not the uncommitted row
+    writer.execute("COMMIT")
+    with store.snapshot() as db:
+        assert db.execute("SELECT value FROM meta WHERE key = 'pending'").fetchone() == ("x",)
+    writer.close()

@@ -110,12 +110,15 @@ class LabelStore:
     Args:
         workspace: The workspace folder; made, with its database, when missing.
         create: Make the workspace when it does not exist (else refuse).
+        durable: Flush every commit to disk (``synchronous=FULL``). The trainer, which
+            writes no labels, opens its store without it: its frequent status writes then
+            cost no disk flush that the app's label commits would queue behind.
 
     Raises:
         InputError: The folder holds a database made by another version, or not by us.
     """
 
-    def __init__(self, workspace: str | Path, *, create: bool = True) -> None:
+    def __init__(self, workspace: str | Path, *, create: bool = True, durable: bool = True) -> None:
         self.workspace = Path(workspace)
         self.path = self.workspace / DB_NAME
         if self.workspace.exists() and not self.workspace.is_dir():
@@ -128,7 +131,7 @@ class LabelStore:
             self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
             self._db.execute("PRAGMA journal_mode=WAL")
             # FULL: a label acknowledged on screen survives a power cut, not only a kill.
-            self._db.execute("PRAGMA synchronous=FULL")
+            self._db.execute(f"PRAGMA synchronous={'FULL' if durable else 'NORMAL'}")
             self._db.execute("PRAGMA foreign_keys=ON")
             self._db.execute("PRAGMA busy_timeout=5000")
         except sqlite3.DatabaseError as exc:
@@ -192,6 +195,26 @@ class LabelStore:
                 self._db.execute("COMMIT")
             finally:
                 self._depth -= 1
+
+    @contextmanager
+    def snapshot(self) -> Iterator[sqlite3.Connection]:
+        """One consistent read-only view of the store.
+
+        Unlike ``transaction`` it takes no write lock, so in WAL mode it never waits for
+        another process's writer (the trainer storing a version): what polls the store
+        from the app must not hold up a label behind someone else's commit.
+        """
+        with self._lock:
+            if self._depth:
+                yield self._db
+                return
+            self._db.execute("BEGIN DEFERRED")
+            self._depth += 1
+            try:
+                yield self._db
+            finally:
+                self._depth -= 1
+                self._db.execute("COMMIT")
 
     def _query(self, sql: str, args: Iterable[Any] = ()) -> list[Any]:
         with self._lock:

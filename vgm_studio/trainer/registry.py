@@ -142,13 +142,13 @@ def _active(db: sqlite3.Connection) -> int | None:
 
 def active_version(store: LabelStore) -> int | None:
     """N of the version whose predictions the app shows; None when that is no version of ours."""
-    with store.transaction() as db:
+    with store.snapshot() as db:
         return _active(db)
 
 
 def list_models(store: LabelStore) -> list[ModelRecord]:
     """Every registered version, oldest first."""
-    with store.transaction() as db:
+    with store.snapshot() as db:
         active = _active(db)
         rows = db.execute(
             "SELECT version, path, created_at, metrics, labels_seen, seconds, promoted "
@@ -267,7 +267,7 @@ def request_training(store: LabelStore, from_scratch: bool = False) -> int:
 def pending_requests(store: LabelStore) -> list[tuple[int, bool]]:
     """(id, from_scratch) of requests not yet served, oldest first."""
     ensure_tables(store)
-    with store.transaction() as db:
+    with store.snapshot() as db:
         rows = db.execute(
             "SELECT id, from_scratch FROM train_requests WHERE done_at IS NULL ORDER BY id"
         ).fetchall()
@@ -322,7 +322,7 @@ def report(
 
 def read_state(store: LabelStore) -> dict[str, str]:
     ensure_tables(store)
-    with store.transaction() as db:
+    with store.snapshot() as db:
         return dict(db.execute("SELECT key, value FROM trainer_state").fetchall())
 
 
@@ -339,7 +339,7 @@ def _alive(pid: int) -> bool:
 def trainer_status(store: LabelStore) -> TrainerStatus:
     """The trainer's state for the app's panel; cheap enough to poll every second."""
     ensure_tables(store)
-    with store.transaction() as db:
+    with store.snapshot() as db:
         state = dict(db.execute("SELECT key, value FROM trainer_state").fetchall())
         active = _active(db)
         metrics_row = db.execute(

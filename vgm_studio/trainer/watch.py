@@ -49,7 +49,7 @@ class PromotionWatcher:
 
     def _active_model(self) -> str | None:
         try:
-            with self.store.transaction() as db:
+            with self.store.snapshot() as db:
                 row = db.execute("SELECT value FROM meta WHERE key = 'active_model'").fetchone()
             return row[0] if row else None
         except Exception:  # the store is busy or closing: nothing new this time
