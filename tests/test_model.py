@@ -94,6 +94,26 @@ def test_folded_vgm_batch_equals_pixel_unshuffle_of_pair_map():
     np.testing.assert_allclose(turned[0], dense[0][:, ::-1, ::-1], atol=1e-5)
 
 
+def test_spread_figures_come_from_the_match_covariance():
+    from vgm_studio.model.features import figures_matrix, sample_from_scans
+
+    pts = np.zeros((3, 2))
+    # xy variances 4e-4 and 1e-2 m², rotated by 30°: the top eigenvalue is still 1e-2.
+    c, s = np.cos(np.pi / 6), np.sin(np.pi / 6)
+    rot = np.array([[c, -s], [s, c]])
+    cov = np.zeros((3, 3))
+    cov[:2, :2] = rot @ np.diag([4e-4, 1e-2]) @ rot.T
+    cov[2, 2] = 1e-6
+    figures = {"inlier_ratio": 0.8, "residual": 0.01, "covariance": cov.tolist()}
+    sample = sample_from_scans(pts, pts, [0.0, 0.0, 0.0], figures)
+    assert sample.spread_xy == pytest.approx(-2.0) and sample.spread_theta == pytest.approx(-6.0)
+    degenerate = sample_from_scans(pts, pts, [0.0, 0.0, 0.0], {**figures, "covariance": None})
+    assert (degenerate.spread_xy, degenerate.spread_theta) == (0.0, 0.0)
+    both = figures_matrix([sample, degenerate], spread=True)
+    np.testing.assert_allclose(both, [[0.8, -2.0, -2.0, -6.0], [0.8, -2.0, 0.0, 0.0]])
+    assert figures_matrix([sample], spread=False).shape == (1, 2)
+
+
 def test_rgb_plot_colours():
     s = PairSample(np.array([[1.0, 0.0]], np.float32), np.array([[0.0, 5.0]], np.float32), 1, 0)
     img = rgb_plot(s, size=200, extent=20.0)
@@ -248,19 +268,23 @@ def test_train_and_eval_commands(sim_edges, tmp_path):
     assert missing.returncode == 1 and "no such model file" in missing.stderr
 
 
-def test_prefolded_lifted_input_matches_network_on_raw_vgms():
+@pytest.mark.parametrize(("occupancy", "spread"), [(False, False), (True, True)])
+def test_prefolded_lifted_input_matches_network_on_raw_vgms(occupancy, spread):
     from vgm_studio.model.features import figures_matrix
     from vgm_studio.model.networks import build_network
     from vgm_studio.model.validator import input_spec
 
     torch.manual_seed(0)
-    net, hyper = build_network("vgmnet", {"figures": True})
+    net, hyper = build_network(
+        "vgmnet", {"figures": True, "occupancy": occupancy, "spread": spread}
+    )
     net.eval()
     spec = input_spec("vgmnet", hyper, VGMParams())
-    assert spec.fold == 8 and spec.lift == 0.5
+    assert spec.fold == 8 and spec.lift == 0.5 and spec.occupancy == occupancy
     samples = random_samples(3, seed=3)
     x, extra = spec.tensors(samples, torch.device("cpu"))
     raw = torch.from_numpy(vgm_batch(samples, VGMParams()).copy())
-    figs = torch.from_numpy(figures_matrix(samples).astype(np.float32))
+    figs = torch.from_numpy(figures_matrix(samples, spread).astype(np.float32))
+    assert extra is not None and extra.shape == (3, 4 if spread else 2)
     with torch.inference_mode():
         np.testing.assert_allclose(net(x, extra).numpy(), net(raw, figs).numpy(), atol=1e-5)

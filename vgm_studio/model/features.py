@@ -23,12 +23,19 @@ from vgm_studio.vgm.grid import VGMParams, grid_cells
 
 @dataclass(frozen=True)
 class PairSample:
-    """One matched pair, both scans already in the previous scan's frame (float32 points)."""
+    """One matched pair, both scans already in the previous scan's frame (float32 points).
+
+    ``spread_xy`` and ``spread_theta`` are log10 of the match estimate's largest position
+    variance (m², the top eigenvalue of its xy covariance) and of its heading variance
+    (rad²); 0 (1 m², 1 rad²) where the matcher gave no covariance (a degenerate match).
+    """
 
     prev: NDArray[np.float32]
     cur: NDArray[np.float32]
     inlier_ratio: float
     residual: float
+    spread_xy: float = 0.0
+    spread_theta: float = 0.0
 
 
 def sample_from_scans(
@@ -41,12 +48,25 @@ def sample_from_scans(
     figures = figures or {}
     moved = se2.transform_points(np.asarray(estimate, dtype=np.float64), cur_points)
     residual = figures.get("residual")
+    spread_xy, spread_theta = _spread(figures.get("covariance"))
     return PairSample(
         prev=np.asarray(prev_points, dtype=np.float32),
         cur=moved.astype(np.float32),
         inlier_ratio=float(figures.get("inlier_ratio", 0.0) or 0.0),  # type: ignore[arg-type]
         residual=float(residual) if isinstance(residual, int | float) else math.inf,
+        spread_xy=spread_xy,
+        spread_theta=spread_theta,
     )
+
+
+def _spread(covariance: object) -> tuple[float, float]:
+    """log10 of the largest xy variance and of the heading variance, clipped to [-12, 0]."""
+    if covariance is None:
+        return 0.0, 0.0
+    c = np.asarray(covariance, dtype=np.float64).reshape(3, 3)
+    top = float(np.linalg.eigvalsh(c[:2, :2])[-1])
+    values = np.log10(np.clip([top, c[2, 2]], 1e-12, 1.0))
+    return float(values[0]), float(values[1])
 
 
 def load_samples(
@@ -72,19 +92,22 @@ def vgm_batch(
     rotations: Sequence[float] | NDArray[np.float64] | None = None,
     fold: int = 1,
     lift: float = 1.0,
+    occupancy: bool = False,
 ) -> NDArray[np.float32]:
     """VGMs of a batch; ``rotations`` turn whole pairs (augmentation), ``lift`` raises the
-    occupied cells' values to that power.
+    occupied cells' values to that power, ``occupancy`` adds two channels that are 1 in each
+    scan's occupied cells (every point counts alike, as in a plot).
 
-    With ``fold`` f > 1 the result is space-to-depth folded, (B, 2·f², size/f, size/f), laid
+    With ``fold`` f > 1 the result is space-to-depth folded, (B, C·f², size/f, size/f), laid
     out as ``torch.nn.PixelUnshuffle(f)`` would give, but written straight from the occupied
-    cells: no dense 400×400 copy to shuffle. ``fold=1`` gives (B, 2, size, size). The array
+    cells: no dense 400×400 copy to shuffle (C is 2, or 4 with ``occupancy``). ``fold=1``
+    gives (B, C, size, size). The array
     is a channels-last view (``.transpose(0, 3, 1, 2)`` of a (B, H, W, C) buffer).
     """
     if params.size % fold:
         raise ValueError(f"VGM size {params.size} is not a multiple of fold {fold}")
     side = params.size // fold
-    depth = 2 * fold * fold
+    depth = (4 if occupancy else 2) * fold * fold
     # Written channels-last (B, H, W, C) and returned as a (B, C, H, W) view: torch takes it
     # as a channels-last tensor without copying the mostly-zero batch once more.
     out = np.zeros((len(samples), side, side, depth), dtype=np.float32)
@@ -100,8 +123,10 @@ def vgm_batch(
             if lift != 1.0:
                 value = value**lift
             i, j = np.divmod(cell, params.size)
-            channel = (c * fold + i % fold) * fold + j % fold
-            flat[k, ((i // fold) * side + j // fold) * depth + channel] = value
+            at = ((i // fold) * side + j // fold) * depth + (i % fold) * fold + j % fold
+            flat[k, at + c * fold * fold] = value
+            if occupancy:
+                flat[k, at + (c + 2) * fold * fold] = 1.0
     return out.transpose(0, 3, 1, 2)
 
 
@@ -142,8 +167,15 @@ def rgb_batch(
     return out
 
 
-def figures_matrix(samples: Sequence[PairSample]) -> NDArray[np.float64]:
-    """(N, 2) matcher figures for the ``score`` model: inlier ratio and log10 residual."""
+def figures_matrix(samples: Sequence[PairSample], spread: bool = False) -> NDArray[np.float64]:
+    """(N, 2) matcher figures: inlier ratio and log10 residual; with ``spread`` (N, 4), the
+    estimate's log10 position and heading variances after them."""
     res = np.array([s.residual for s in samples], dtype=np.float64)
     res = np.where(np.isfinite(res), res, 1.0)
-    return np.column_stack([[s.inlier_ratio for s in samples], np.log10(np.maximum(res, 1e-4))])
+    columns: list[list[float] | NDArray[np.float64]] = [
+        [s.inlier_ratio for s in samples],
+        np.log10(np.maximum(res, 1e-4)),
+    ]
+    if spread:
+        columns += [[s.spread_xy for s in samples], [s.spread_theta for s in samples]]
+    return np.column_stack(columns)

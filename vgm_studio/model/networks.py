@@ -85,7 +85,10 @@ class SparseConfig:
     then run a small strided CNN on the 64× smaller grid. ``figures`` adds the matcher's
     inlier ratio and log residual to the pooled features. ``lift`` raises cell values to
     that power first: the hit ratio n/n_max leaves far, single-point cells near zero, and
-    the lift lets them count."""
+    the lift lets them count. ``occupancy`` adds each scan's occupied cells as two more
+    channels, every point at equal weight, as the RGB plot baseline sees them. ``spread``
+    adds the estimate's log10 position and heading variances to the figures: a match along
+    a featureless corridor is free to slide, and its covariance says so."""
 
     fold: int = 8
     pointwise: int = 32
@@ -94,6 +97,8 @@ class SparseConfig:
     dropout: float = 0.3
     figures: bool = False
     lift: float = 0.5
+    occupancy: bool = False
+    spread: bool = False
 
 
 class VGMNet(nn.Module):
@@ -104,13 +109,15 @@ class VGMNet(nn.Module):
         c = config or SparseConfig()
         self.fold = nn.PixelUnshuffle(c.fold)
         self.lift = c.lift
+        self.occupancy = c.occupancy
         stem = [
-            nn.Conv2d(2 * c.fold * c.fold, c.pointwise, 1, bias=False),
+            nn.Conv2d((4 if c.occupancy else 2) * c.fold * c.fold, c.pointwise, 1, bias=False),
             nn.BatchNorm2d(c.pointwise),
             nn.ReLU(inplace=True),
         ]
         self.features, width = _stack(stem, c.pointwise, c.channels)
-        self.head = _PooledHead(width, c.hidden, c.dropout, extra=2 if c.figures else 0)
+        extra = (4 if c.spread else 2) if c.figures else 0
+        self.head = _PooledHead(width, c.hidden, c.dropout, extra=extra)
 
     def forward(self, x: torch.Tensor, extra: torch.Tensor | None = None) -> torch.Tensor:
         """Takes (B, 2, S, S) VGMs, or the same already folded and lifted to
@@ -118,7 +125,12 @@ class VGMNet(nn.Module):
         the occupied cells costs nothing; a dense ``pow`` costs a millisecond a pair), and,
         when built with ``figures``, (B, 2) matcher figures."""
         if x.shape[1] == 2:
-            x = self.fold(x.clamp(min=0.0).pow(self.lift))
+            x = x.clamp(min=0.0)
+            if self.occupancy:
+                x = torch.cat([x.pow(self.lift), (x > 0).to(x.dtype)], dim=1)
+            else:
+                x = x.pow(self.lift)
+            x = self.fold(x)
         return self.head(self.features(x), extra)
 
 

@@ -230,10 +230,12 @@ def train(
     payload: dict[str, Any] = {"model": config.model, "vgm": asdict(config.vgm)}
 
     if config.model == "score":
-        x = figures_matrix([data.samples[i] for i in train_idx])
+        spread = bool(config.hyper.get("spread", False))
+        x = figures_matrix([data.samples[i] for i in train_idx], spread)
         score = ScoreModel.fit(x, data.labels[train_idx])
-        probs = score.predict(figures_matrix(val_samples))
-        payload |= {"hyper": {}, "score": asdict(score), "device": "cpu", "history": []}
+        probs = score.predict(figures_matrix(val_samples, spread))
+        hyper_score = {"spread": spread} if spread else {}
+        payload |= {"hyper": hyper_score, "score": asdict(score), "device": "cpu", "history": []}
     else:
         device = pick_device(config.device)
         net, hyper = build_network(config.model, config.hyper)

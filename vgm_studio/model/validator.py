@@ -46,6 +46,8 @@ class InputSpec:
     image: int = 200
     figures: bool = False
     lift: float = 1.0
+    occupancy: bool = False
+    spread: bool = False
 
     def batch(
         self,
@@ -53,10 +55,17 @@ class InputSpec:
         rotations: Sequence[float] | NDArray[np.float64] | None = None,
     ) -> NDArray[Any]:
         if self.kind == "vgm":
-            return vgm_batch(samples, self.vgm, rotations, fold=self.fold, lift=self.lift)
+            return vgm_batch(
+                samples,
+                self.vgm,
+                rotations,
+                fold=self.fold,
+                lift=self.lift,
+                occupancy=self.occupancy,
+            )
         if self.kind == "rgb":
             return rgb_batch(samples, self.image, rotations)
-        return figures_matrix(samples)
+        return figures_matrix(samples, self.spread)
 
     def tensors(
         self,
@@ -69,19 +78,25 @@ class InputSpec:
         x = x.contiguous(memory_format=torch.channels_last)
         extra = None
         if self.figures:
-            extra = torch.from_numpy(figures_matrix(samples).astype(np.float32)).to(device)
+            figures = figures_matrix(samples, self.spread).astype(np.float32)
+            extra = torch.from_numpy(figures).to(device)
         return x, extra
 
 
 def input_spec(model: str, hyper: dict[str, Any], vgm: VGMParams) -> InputSpec:
+    spread = bool(hyper.get("spread", False))
     if model == "score":
-        return InputSpec("figures", vgm)
+        return InputSpec("figures", vgm, spread=spread)
     if model == "rgb-baseline":
         return InputSpec("rgb", vgm, image=int(hyper.get("image", 200)))
     fold = int(hyper.get("fold", 1))
     # A folded batch is written already lifted (see VGMNet.forward); unfolded ones are not.
     lift = float(hyper.get("lift", 1.0)) if fold > 1 else 1.0
-    return InputSpec("vgm", vgm, fold=fold, figures=bool(hyper.get("figures", False)), lift=lift)
+    occupancy = bool(hyper.get("occupancy", False)) and fold > 1
+    figures = bool(hyper.get("figures", False))
+    return InputSpec(
+        "vgm", vgm, fold=fold, figures=figures, lift=lift, occupancy=occupancy, spread=spread
+    )
 
 
 def forward(net: nn.Module, x: torch.Tensor, extra: torch.Tensor | None) -> torch.Tensor:
@@ -156,7 +171,7 @@ class Validator:
     ) -> NDArray[np.float64]:
         """p(success) for each sample, computed in batches."""
         if self.score is not None:
-            return self.score.predict(figures_matrix(samples))
+            return self.score.predict(figures_matrix(samples, len(self.score.mean) == 4))
         assert self.network is not None
         logits = batched_logits(self.network, self.spec, samples, self.device, batch_size)
         return np.asarray(1.0 / (1.0 + np.exp(-logits)))

@@ -49,6 +49,16 @@ def train(
     figures: Annotated[
         bool, typer.Option(help="vgmnet: also read the matcher's inlier ratio and residual.")
     ] = True,
+    occupancy: Annotated[
+        bool, typer.Option(help="vgmnet: also read each scan's occupied cells, as a plot does.")
+    ] = False,
+    spread: Annotated[
+        bool | None,
+        typer.Option(
+            help="vgmnet, score: also read the match's position and heading variances.",
+            show_default="on for vgmnet, off for score",
+        ),
+    ] = None,
     seed: Annotated[int, typer.Option(help="Seed for split, draws and weights.")] = 0,
     device: Annotated[Device, typer.Option(help="auto takes a GPU when there is one.")] = (
         Device.auto
@@ -62,7 +72,15 @@ def train(
     if out.suffix != ".pt":
         raise typer.BadParameter("the checkpoint must end in .pt", param_hint="--out")
     data = read_labelled(edges)
-    hyper: dict[str, Any] = {"figures": figures} if model is ModelName.vgmnet else {}
+    hyper: dict[str, Any] = {}
+    if model is ModelName.vgmnet:
+        hyper = {
+            "figures": figures,
+            "occupancy": occupancy,
+            "spread": figures and spread is not False,
+        }
+    elif model is ModelName.score:
+        hyper = {"spread": bool(spread)}
     config = TrainConfig(
         model=model.value,
         epochs=epochs,
