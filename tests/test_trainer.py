@@ -30,7 +30,9 @@ from vgm_studio.trainer.fit import FitConfig
 from vgm_studio.trainer.supervisor import Backoff, TrainerSupervisor
 from vgm_studio.trainer.worker import Job, TrainerConfig, Worker
 
-FAST = FitConfig(epochs=6, epoch_size=256, batch_size=16, lr=1e-2)
+# The made-up failures below keep their success's matcher figures and covariance, so the
+# spread would only be noise here: these tests are about the trainer, not the features.
+FAST = FitConfig(epochs=6, epoch_size=256, batch_size=16, lr=1e-2, hyper={"figures": True})
 
 
 def _balanced(path: Path, failures: int = 80) -> list[Edge]:

@@ -52,7 +52,7 @@ class FitConfig:
         vgm: VGM parameters.
     """
 
-    # Measured on simulated corridor loops, 25 to 300 labels (docs/trainer-benchmarks.md):
+    # Measured on simulated corridor loops, 25 to 300 labels (BENCHMARKS.md, background trainer):
     # small batches and a lower peak rate than ``vgm-studio train`` learn more from few labels.
     epochs: int = 12
     epoch_size: int = 1024
@@ -62,7 +62,7 @@ class FitConfig:
     patience: int = 4
     augment: bool = True
     seed: int = 0
-    hyper: dict[str, Any] = field(default_factory=lambda: {"figures": True})
+    hyper: dict[str, Any] = field(default_factory=lambda: {"figures": True, "spread": True})
     vgm: VGMParams = field(default_factory=VGMParams)
 
 
