@@ -31,13 +31,6 @@ VALIDATORS = ("none", "vgmnet", "rgb-baseline", "score", "reference")
 TARGET_M, TARGET_S = 0.05, 300.0
 
 # Runs the command in a fresh process; registers it on the CLI if the app does not yet.
-_RUNNER = (
-    "import sys\n"
-    "from vgm_studio.tools import cmd, slam_cmd\n"
-    "if 'slam' not in {c.name for c in cmd.app.registered_commands}:\n"
-    "    cmd.app.command('slam')(slam_cmd.slam)\n"
-    "cmd.main(sys.argv[1:])\n"
-)
 
 
 def _model(name: str) -> Path:
@@ -79,7 +72,9 @@ def run(validator: str, robust: str) -> dict:
         args += ["--reference", intel / "intel.gfs.log", "--time-offset", GFS_OFFSET]
     start = time.perf_counter()
     proc = subprocess.run(
-        [sys.executable, "-c", _RUNNER, *map(str, args)], capture_output=True, text=True
+        [sys.executable, "-m", "vgm_studio.tools.cmd", *map(str, args)],
+        capture_output=True,
+        text=True,
     )
     wall = time.perf_counter() - start
     if proc.returncode:

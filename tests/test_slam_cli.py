@@ -13,15 +13,13 @@ import rerun.chunk as rc
 from vgm_studio.core import se2
 from vgm_studio.datasets import open_log
 from vgm_studio.simulation.simulate import SimConfig, simulate
-from vgm_studio.tools import cmd, slam_cmd
+from vgm_studio.tools import cmd
 
 FALSE_LOOPS = 10
 
 
 def run(*args: str | Path) -> None:
-    """The command as ``vgm-studio`` runs it (registered here too while the CLI settles)."""
-    if "slam" not in {c.name for c in cmd.app.registered_commands}:
-        cmd.app.command("slam")(slam_cmd.slam)
+    """The command as ``vgm-studio`` runs it, in this process."""
     cmd.main(["slam", *map(str, args)])
 
 
