@@ -170,16 +170,17 @@ def choose_threshold(labels: NDArray[np.bool_], probs: NDArray[np.float64]) -> f
     return float(cuts[best[np.argmin(np.abs(cuts[best] - 0.5))]])
 
 
-def _balanced_draws(
+def balanced_draws(
     labels: NDArray[np.bool_], count: int, rng: np.random.Generator
 ) -> NDArray[np.int64]:
+    """``count`` row indices drawn with replacement, each class half of the time."""
     pos = max(int(labels.sum()), 1)
     neg = max(int((~labels).sum()), 1)
     weights = np.where(labels, 0.5 / pos, 0.5 / neg)
     return rng.choice(len(labels), size=count, replace=True, p=weights / weights.sum())
 
 
-def _balanced_bce(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+def balanced_bce(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """BCE in which both classes weigh the same, whatever their counts."""
     pos = target.sum().clamp(min=1)
     neg = (1 - target).sum().clamp(min=1)
@@ -187,6 +188,27 @@ def _balanced_bce(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     return (
         nn.functional.binary_cross_entropy_with_logits(logits, target, reduction="none") * w
     ).sum()
+
+
+def train_step(
+    net: nn.Module,
+    spec: InputSpec,
+    samples: Sequence[PairSample],
+    labels: NDArray[np.bool_],
+    rotations: NDArray[np.float64] | None,
+    optimiser: torch.optim.Optimizer,
+    schedule: torch.optim.lr_scheduler.LRScheduler,
+    device: torch.device,
+) -> float:
+    """One optimiser step on a batch (each pair turned by ``rotations``); returns its loss."""
+    x, extra = spec.tensors(samples, device, rotations)
+    y = torch.from_numpy(labels.astype(np.float32)).to(device)
+    loss = nn.functional.binary_cross_entropy_with_logits(forward(net, x, extra), y)
+    optimiser.zero_grad(set_to_none=True)
+    loss.backward()
+    optimiser.step()
+    schedule.step()
+    return float(loss.detach())
 
 
 def train(
@@ -296,7 +318,7 @@ def _fit(
     for epoch in range(1, config.epochs + 1):
         t0 = time.perf_counter()
         net.train()
-        draws = train_idx[_balanced_draws(train_labels, per_epoch, rng)]
+        draws = train_idx[balanced_draws(train_labels, per_epoch, rng)]
         bar = tqdm(
             range(steps),
             desc=f"epoch {epoch}/{config.epochs}",
@@ -308,17 +330,13 @@ def _fit(
         for step in bar:
             idx = draws[step * config.batch_size : (step + 1) * config.batch_size]
             rot = rng.uniform(0, 2 * np.pi, len(idx)) if config.augment else None
-            x, extra = spec.tensors([data.samples[i] for i in idx], device, rot)
-            y = torch.from_numpy(data.labels[idx].astype(np.float32)).to(device)
-            loss = nn.functional.binary_cross_entropy_with_logits(forward(net, x, extra), y)
-            optimiser.zero_grad(set_to_none=True)
-            loss.backward()
-            optimiser.step()
-            schedule.step()
-            total += float(loss.detach())
+            batch = [data.samples[i] for i in idx]
+            total += train_step(
+                net, spec, batch, data.labels[idx], rot, optimiser, schedule, device
+            )
             bar.set_postfix(loss=f"{total / (step + 1):.3f}")
         logits = torch.from_numpy(batched_logits(net, spec, val_samples, device, 128))
-        val_loss = float(_balanced_bce(logits, val_target))
+        val_loss = float(balanced_bce(logits, val_target))
         acc = float(((logits > 0).numpy() == val_labels).mean()) if len(val_labels) else math.nan
         history.append(
             {

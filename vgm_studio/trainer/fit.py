@@ -22,14 +22,18 @@ from typing import Any
 import numpy as np
 import torch
 from numpy.typing import NDArray
-from torch import nn
 
 from vgm_studio.model.checkpoint import FORMAT
 from vgm_studio.model.features import PairSample
 from vgm_studio.model.metrics import binary_metrics
 from vgm_studio.model.networks import build_network
-from vgm_studio.model.training import _balanced_bce, _balanced_draws, choose_threshold
-from vgm_studio.model.validator import batched_logits, forward, input_spec
+from vgm_studio.model.training import (
+    balanced_bce,
+    balanced_draws,
+    choose_threshold,
+    train_step,
+)
+from vgm_studio.model.validator import batched_logits, input_spec
 from vgm_studio.vgm.grid import VGMParams
 
 MODEL = "vgmnet"
@@ -131,23 +135,17 @@ def fit(
     for epoch in range(1, config.epochs + 1):
         t0 = time.perf_counter()
         net.train()
-        draws = train_idx[_balanced_draws(labels[train_idx], config.epoch_size, rng)]
+        draws = train_idx[balanced_draws(labels[train_idx], config.epoch_size, rng)]
         total = 0.0
         for step in range(steps):
             idx = draws[step * config.batch_size : (step + 1) * config.batch_size]
             rot = rng.uniform(0, 2 * np.pi, len(idx)) if config.augment else None
-            x, extra = spec.tensors([samples[i] for i in idx], device, rot)
-            y = torch.from_numpy(labels[idx].astype(np.float32))
-            loss = nn.functional.binary_cross_entropy_with_logits(forward(net, x, extra), y)
-            optimiser.zero_grad(set_to_none=True)
-            loss.backward()
-            optimiser.step()
-            schedule.step()
-            total += float(loss.detach())
+            batch = [samples[i] for i in idx]
+            total += train_step(net, spec, batch, labels[idx], rot, optimiser, schedule, device)
         record = {"epoch": epoch, "train_loss": total / steps, "seconds": 0.0}
         if len(held_idx):
             logits = torch.from_numpy(batched_logits(net, spec, held_samples, device, 128))
-            val_loss = float(_balanced_bce(logits, held_target))
+            val_loss = float(balanced_bce(logits, held_target))
             record["val_loss"] = val_loss
         else:  # nothing held out yet: the last epoch is the best we know
             val_loss = -float(epoch)
