@@ -13,7 +13,7 @@ import json
 import sqlite3
 import threading
 from collections.abc import Iterable, Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -177,14 +177,26 @@ class LabelStore:
         with self._lock:
             self._db.close()
 
-    @contextmanager
-    def transaction(self) -> Iterator[sqlite3.Connection]:
+    def transaction(self) -> AbstractContextManager[sqlite3.Connection]:
         """One committed transaction; rolled back whole if anything inside raises."""
+        return self._begin("IMMEDIATE")
+
+    def snapshot(self) -> AbstractContextManager[sqlite3.Connection]:
+        """One consistent read-only view of the store.
+
+        Unlike ``transaction`` it takes no write lock, so in WAL mode it never waits for
+        another process's writer (the trainer storing a version): what polls the store
+        from the app must not hold up a label behind someone else's commit.
+        """
+        return self._begin("DEFERRED")
+
+    @contextmanager
+    def _begin(self, mode: str) -> Iterator[sqlite3.Connection]:
         with self._lock:
             if self._depth:  # nested: part of the caller's transaction
                 yield self._db
                 return
-            self._db.execute("BEGIN IMMEDIATE")
+            self._db.execute(f"BEGIN {mode}")
             self._depth += 1
             try:
                 yield self._db
@@ -195,26 +207,6 @@ class LabelStore:
                 self._db.execute("COMMIT")
             finally:
                 self._depth -= 1
-
-    @contextmanager
-    def snapshot(self) -> Iterator[sqlite3.Connection]:
-        """One consistent read-only view of the store.
-
-        Unlike ``transaction`` it takes no write lock, so in WAL mode it never waits for
-        another process's writer (the trainer storing a version): what polls the store
-        from the app must not hold up a label behind someone else's commit.
-        """
-        with self._lock:
-            if self._depth:
-                yield self._db
-                return
-            self._db.execute("BEGIN DEFERRED")
-            self._depth += 1
-            try:
-                yield self._db
-            finally:
-                self._depth -= 1
-                self._db.execute("COMMIT")
 
     def _query(self, sql: str, args: Iterable[Any] = ()) -> list[Any]:
         with self._lock:

@@ -336,6 +336,14 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def labels_since(db: sqlite3.Connection, seen: int) -> int:
+    """Labels made (or imported) after event ``seen``: what the next version has not read."""
+    row = db.execute(
+        "SELECT COUNT(*) FROM events WHERE id > ? AND action IN ('label', 'import')", (seen,)
+    ).fetchone()
+    return int(row[0])
+
+
 def trainer_status(store: LabelStore) -> TrainerStatus:
     """The trainer's state for the app's panel; cheap enough to poll every second."""
     ensure_tables(store)
@@ -345,10 +353,7 @@ def trainer_status(store: LabelStore) -> TrainerStatus:
         metrics_row = db.execute(
             "SELECT metrics FROM models WHERE version = ?", (active,)
         ).fetchone()
-        seen = int(state.get("events_seen", "0"))
-        since = db.execute(
-            "SELECT COUNT(*) FROM events WHERE id > ? AND action IN ('label', 'import')", (seen,)
-        ).fetchone()[0]
+        since = labels_since(db, int(state.get("events_seen", "0")))
         pending = db.execute(
             "SELECT 1 FROM train_requests WHERE done_at IS NULL LIMIT 1"
         ).fetchone()
@@ -367,7 +372,7 @@ def trainer_status(store: LabelStore) -> TrainerStatus:
         epoch=int(state.get("epoch", "0")),
         epochs=int(state.get("epochs", "0")),
         metrics=json.loads(metrics_row[0]) if metrics_row else {},
-        labels_since=int(since),
+        labels_since=since,
         active_version=active,
         updated_at=state.get("updated_at"),
         message=state.get("message", ""),

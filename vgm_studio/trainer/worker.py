@@ -128,13 +128,10 @@ class Worker:
 
     def _new_labels(self) -> tuple[int, int]:
         """(labels made since the last version's data was read, the newest event id)."""
-        with self.store.transaction() as db:
+        with self.store.snapshot() as db:
             newest = db.execute("SELECT COALESCE(MAX(id), 0) FROM events").fetchone()[0]
-            count = db.execute(
-                "SELECT COUNT(*) FROM events WHERE id > ? AND action IN ('label', 'import')",
-                (self.seen,),
-            ).fetchone()[0]
-        return int(count), int(newest)
+            count = registry.labels_since(db, self.seen)
+        return count, int(newest)
 
     def due(self) -> Job | None:
         """The training to do now, if any: a request, or enough new labels."""
