@@ -167,11 +167,12 @@ class Studio:
         front, so nobody is yanked away from the edge they are looking at.
         """
         self._predictions = self.store.predictions()
+        snap = self._snapshot()
         for tab in list(self._tabs.values()):
             with tab.lock:
                 if tab.queue in (Queue.uncertain, Queue.disagree):
                     current = tab.edge_id
-                    fresh = order(tab.queue, self._snapshot())
+                    fresh = order(tab.queue, snap)
                     if current is not None:
                         fresh = [current, *(e for e in fresh if e != current)]
                     tab.order, tab.index = fresh, 0

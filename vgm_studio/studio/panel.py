@@ -5,13 +5,16 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import viser
 
 from vgm_studio.core import se2
 from vgm_studio.matching.edges import Edge
 from vgm_studio.studio.queues import Queue, is_conflict
+
+if TYPE_CHECKING:  # the trainer (and torch) is imported only where a studio runs one
+    from vgm_studio.trainer import TrainerStatus
 
 # Keys under an annotator's left hand, so the right stays on the mouse.
 HOTKEYS: dict[str, str] = {
@@ -84,9 +87,9 @@ def _caller(actions: dict[str, Callable[[], None]], action: str) -> Callable[[An
     return call
 
 
-def trainer_text(status: Any) -> str:
-    """The background trainer's state in two lines (``status`` is a ``TrainerStatus``)."""
-    state = status.state
+def trainer_text(status: TrainerStatus) -> str:
+    """The background trainer's state in two lines."""
+    state: str = status.state
     if state == "training" and status.epochs:
         state = f"training, epoch {status.epoch} of {status.epochs}"
     active = f"v{status.active_version}" if status.active_version is not None else "none yet"

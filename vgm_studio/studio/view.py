@@ -29,14 +29,13 @@ class PlacedPair:
     heatmap_rgb: NDArray[np.uint8]  # (h, w, 3) RGB, row i along +y: the occupied part of the VGM
     heatmap_centre: tuple[float, float]  # where the crop's centre lies, metres
     cur: NDArray[np.float32]  # (M, 3) current scan in the previous scan's frame
+    resolution: float  # metres per heatmap pixel (the VGM's cell size)
 
     @property
     def heatmap_size(self) -> tuple[float, float]:
         """(width, height) of the crop in metres."""
         h, w = self.heatmap_rgb.shape[:2]
-        return w * self._resolution, h * self._resolution
-
-    _resolution: float = 0.05
+        return w * self.resolution, h * self.resolution
 
 
 @dataclass(frozen=True)
