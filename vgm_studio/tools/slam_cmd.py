@@ -100,8 +100,9 @@ def slam(
         Path | None,
         typer.Option(
             metavar="REF",
-            help="Reference poses for --validator reference: a corrected log or a log with "
-            "TRUEPOS.",
+            help="Reference poses (a corrected log or a log with TRUEPOS): the run is scored "
+            "against relations drawn from them (unless --relations), and --validator "
+            "reference uses them.",
             show_default="the log's own reference poses",
         ),
     ] = None,
@@ -194,6 +195,7 @@ def slam(
     from vgm_studio.graph.config import GraphConfig
     from vgm_studio.maps.config import MapConfig
     from vgm_studio.slam.config import FrontEndConfig, SlamConfig, ValidationConfig
+    from vgm_studio.slam.scoring import relations_from_reference, with_own_reference
     from vgm_studio.tools.cmd import _writable_file, _writable_folder
     from vgm_studio.tools.sources import report_skipped
 
@@ -243,7 +245,13 @@ def slam(
                 "relations give no pose per scan; --reference takes a corrected log or a "
                 "log with TRUEPOS (relations go to --relations)",
             )
-        scan_log = with_reference(scan_log, open_log(reference), time_tolerance, time_offset)
+        if reference.resolve() != log.resolve():
+            scan_log = with_reference(scan_log, open_log(reference), time_tolerance, time_offset)
+    scan_log = with_own_reference(scan_log)
+    if matched is None:
+        matched = relations_from_reference(scan_log)
+        if matched is not None:
+            typer.echo(f"scored against {len(matched)} relations drawn from the reference poses")
     config = SlamConfig(
         front_end=FrontEndConfig(
             keyframe_distance=keyframe_distance,
