@@ -21,9 +21,20 @@ class FrontEndConfig:
     Attributes:
         keyframe_distance: A new keyframe after this much travel, metres.
         keyframe_angle_deg: …or after this much rotation, degrees.
-        loop_radius: Loop candidates lie within this distance in the current estimate, metres.
+        loop_radius: Where the graph is certain, loop candidates lie within this distance in
+            the current estimate, metres; the window grows with the graph's uncertainty
+            between the two keyframes (``slam.loop_search``).
         loop_max_angle_deg: …and within this heading difference (a 180° scanner sees little of
-            a place it faced away from), degrees.
+            a place it faced away from), degrees, widened by three σ of the heading.
+        loop_gate: Window candidates pass a Mahalanobis gate at this χ²(2) probability.
+        window_linear: (min, max) half-width of a loop's search window in x and y, metres:
+            three σ of the relative position, clamped.
+        window_angular_deg: (min, max) half-width in heading, degrees.
+        place_candidates: Place-recognition candidates per keyframe (0: none).
+        place_angular_deg: Half-width in heading of a place candidate's window around the
+            descriptor's yaw guess, degrees.
+        submap_keyframes: A loop is matched against a submap of its target keyframe and this
+            many keyframes on each side of it.
         loop_min_gap: …and at least this many keyframes earlier.
         loops_per_keyframe: The nearest this many candidates of each keyframe are matched.
         block: Keyframes added between two updates of the running estimate: the validator
@@ -40,6 +51,12 @@ class FrontEndConfig:
     keyframe_angle_deg: float = 20.0
     loop_radius: float = 3.0
     loop_max_angle_deg: float = 60.0
+    loop_gate: float = 0.99
+    window_linear: tuple[float, float] = (0.3, 3.0)
+    window_angular_deg: tuple[float, float] = (10.0, 30.0)
+    place_candidates: int = 1
+    place_angular_deg: float = 15.0
+    submap_keyframes: int = 5
     loop_min_gap: int = 20
     loops_per_keyframe: int = 2
     block: int = 25
@@ -72,10 +89,27 @@ class ValidationConfig:
 
 
 @dataclass(frozen=True)
+class ConsistencyConfig:
+    """The group-consistency check of loops (``slam.consistency``): the pairwise test and
+    the vote.
+
+    Attributes:
+        enabled: Run the check (off: every loop the validator kept goes in).
+        probability: The χ²(3) gate of a cycle is its quantile at this probability.
+        estimate_weight: The running estimate counts as this many loops in the vote.
+    """
+
+    enabled: bool = True
+    probability: float = 0.99
+    estimate_weight: int = 3
+
+
+@dataclass(frozen=True)
 class SlamConfig:
     """Everything a SLAM run depends on."""
 
     front_end: FrontEndConfig = field(default_factory=FrontEndConfig)
     validation: ValidationConfig = field(default_factory=ValidationConfig)
+    consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
     graph: GraphConfig = field(default_factory=GraphConfig)
     maps: MapConfig = field(default_factory=MapConfig)

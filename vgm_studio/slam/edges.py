@@ -12,6 +12,10 @@ from numpy.typing import NDArray
 from vgm_studio.matching.matcher import MatchResult
 
 SlamEdgeKind = Literal["sequential", "loop"]
+# Where a candidate came from: odometry (sequential edges), the uncertainty window around the
+# estimate, place recognition, or a deliberately false loop (``--inject-false-loops``).
+EdgeSource = Literal["odometry", "window", "place", "injected"]
+Consistency = Literal["kept", "rejected", "not-checked"]
 
 
 @dataclass
@@ -26,7 +30,12 @@ class SlamEdge:
         match: The matcher's result; ``match.estimate`` is the measurement.
         injected: A false loop closure put in on purpose (``--inject-false-loops``).
         p_success: The validator's p(success); NaN when it gives none.
-        kept: Validation let the edge into the graph.
+        kept: The edge went into the graph: the validator kept it and the consistency check
+            did not reject it.
+        source: Where the candidate came from.
+        validated: The validator's own decision (``kept`` before the consistency check).
+        consistency: The group-consistency check's decision on a loop the validator kept;
+            ``not-checked`` for sequential edges and for loops the validator rejected.
     """
 
     kind: SlamEdgeKind
@@ -37,6 +46,9 @@ class SlamEdge:
     injected: bool = False
     p_success: float = math.nan
     kept: bool = True
+    source: EdgeSource = "odometry"
+    validated: bool = True
+    consistency: Consistency = "not-checked"
 
     @property
     def estimate(self) -> NDArray[np.float64]:

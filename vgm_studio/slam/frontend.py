@@ -1,11 +1,13 @@
-"""The front end: sequential edges between keyframes and loop candidates searched in the
-current graph estimate, each matched, validated and handed to the running estimate.
+"""The front end: sequential edges between keyframes and loop candidates searched where the
+robot may be, each matched, validated, checked for consistency and handed to the running
+estimate.
 
 Keyframes are taken a block at a time. For each block the sequential edges are matched from
 odometry and validated together (the validator is fastest on batches), the running estimate
-is updated, then every keyframe of the block looks for earlier keyframes near it in that
-estimate (a KD-tree over their positions), and those pairs are matched from the estimate's
-relative pose, validated, and the kept ones closed into the graph before the next block.
+is updated, then every keyframe of the block proposes loop candidates (``loop_search``: a
+window that grows with the graph's uncertainty, and place recognition), those are matched,
+validated, the ones the validator kept are checked as a group (``consistency``), and the
+survivors closed into the graph before the next block.
 """
 
 from __future__ import annotations
@@ -15,7 +17,6 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 from tqdm import tqdm
 
 from vgm_studio.core import se2
@@ -23,8 +24,11 @@ from vgm_studio.datasets.scans import Scan
 from vgm_studio.graph.config import GraphConfig
 from vgm_studio.graph.pose_graph import GraphEdge, RunningEstimate, edge_covariance
 from vgm_studio.matching.matcher import ScanMatcher
-from vgm_studio.slam.config import FrontEndConfig
+from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
+from vgm_studio.slam.consistency import Loop, consistent
 from vgm_studio.slam.edges import SlamEdge, SlamEdgeKind
+from vgm_studio.slam.loop_search import Candidate, window_candidates
+from vgm_studio.slam.uncertainty import UncertaintyGraph
 
 Validate = Callable[[Sequence[SlamEdge]], None]
 
@@ -77,6 +81,7 @@ class FrontEnd:
         validate: Sets ``p_success`` and ``kept`` on a block of edges.
         config: Keyframe, loop-search and injection settings.
         graph: Noise floors and robust settings for the running estimate.
+        consistency: The group-consistency check of the loops the validator kept.
     """
 
     def __init__(
@@ -87,6 +92,7 @@ class FrontEnd:
         validate: Validate,
         config: FrontEndConfig,
         graph: GraphConfig,
+        consistency: ConsistencyConfig | None = None,
     ) -> None:
         self.scans = scans
         self.odometry = odometry
@@ -94,6 +100,8 @@ class FrontEnd:
         self.validate = validate
         self.config = config
         self.graph = graph
+        self.consistency = consistency or ConsistencyConfig()
+        self._uncertainty = UncertaintyGraph()
         self.estimate = RunningEstimate(odometry[0], graph)
         self.edges: list[SlamEdge] = []
         self._false = false_loop_pairs(odometry, config) if config.false_loops else {}
@@ -140,39 +148,50 @@ class FrontEnd:
                 graph_edge(e, self.graph) if e.kept else odometry_edge(e.a, e.b, odo, self.graph)
             )
             self.estimate.add_keyframe(se2.compose(self.estimate.poses[e.a], factor.measurement))
-            self.estimate.add_edge(factor)
+            self._add(factor)
         self.edges.extend(edges)
         self.estimate.update()
 
     def _loops(self, block: range) -> None:
-        cfg = self.config
         poses = self.estimate.poses
-        newest_old = block.stop - 1 - cfg.loop_min_gap
-        pairs: list[tuple[int, int, bool]] = []
-        if newest_old >= 0:
-            tree = cKDTree(poses[: newest_old + 1, :2])
-            max_angle = math.radians(cfg.loop_max_angle_deg)
-            for b in block:
-                near = tree.query_ball_point(poses[b, :2], cfg.loop_radius)
-                near = [a for a in near if b - a >= cfg.loop_min_gap]
-                near = [
-                    a for a in near if abs(se2.wrap_angle(poses[b, 2] - poses[a, 2])) <= max_angle
-                ]
-                near.sort(key=lambda a: math.dist(poses[a, :2], poses[b, :2]))
-                pairs += [(a, b, False) for a in near[: cfg.loops_per_keyframe]]
-        for b in block:
-            pairs += [(a, b, True) for a in self._false.get(b, [])]
-        edges = []
-        for a, b, injected in pairs:
-            guess = se2.between(poses[a], poses[b])
-            if injected:
-                # A place-recognition false positive: "b is where a was", give or take.
-                guess = self._noise.normal(size=3) * [0.3, 0.3, math.radians(5.0)]
-            edges.append(self._match("loop", a, b, guess, injected))
+        candidates = window_candidates(block, poses, self._uncertainty, self.config)
+        candidates += self._injected(block)
+        edges = [self._match_loop(c) for c in candidates]
         self.validate(edges)
+        for e in edges:
+            e.validated = e.kept
+        self._check_consistency([e for e in edges if e.kept], poses)
         kept = [e for e in edges if e.kept]
         for e in kept:
-            self.estimate.add_edge(graph_edge(e, self.graph))
+            self._add(graph_edge(e, self.graph))
         self.edges.extend(edges)
         if kept:
             self.estimate.update(extra_iterations=2)
+
+    def _injected(self, block: range) -> list[Candidate]:
+        out = []
+        linear, angular = self.config.window_linear[0], math.radians(self.config.place_angular_deg)
+        for b in block:
+            for a in self._false.get(b, []):
+                # A place-recognition false positive: "b is where a was", give or take.
+                guess = self._noise.normal(size=3) * [0.3, 0.3, math.radians(5.0)]
+                out.append(Candidate(a, b, "injected", guess, linear, angular))
+        return out
+
+    def _match_loop(self, c: Candidate) -> SlamEdge:
+        edge = self._match("loop", c.a, c.b, c.guess, injected=c.source == "injected")
+        edge.source = c.source
+        return edge
+
+    def _check_consistency(self, loops: list[SlamEdge], poses: NDArray[np.float64]) -> None:
+        if not self.consistency.enabled or not loops:
+            return
+        checked = [Loop(e.a, e.b, e.estimate, graph_edge(e, self.graph).covariance) for e in loops]
+        flags = consistent(checked, poses, self._uncertainty, self.consistency)
+        for e, ok in zip(loops, flags, strict=True):
+            e.consistency = "kept" if ok else "rejected"
+            e.kept = bool(ok)
+
+    def _add(self, factor: GraphEdge) -> None:
+        self.estimate.add_edge(factor)
+        self._uncertainty.add(factor)

@@ -123,7 +123,15 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
         config.validation, scans, None if reference is None else reference[keyframes]
     )
     t = time.perf_counter()
-    front = FrontEnd(scans, odometry[keyframes], ScanMatcher(), validator, fe, config.graph)
+    front = FrontEnd(
+        scans,
+        odometry[keyframes],
+        ScanMatcher(),
+        validator,
+        fe,
+        config.graph,
+        config.consistency,
+    )
     edges = front.run(progress)
     seconds["front_end"] = time.perf_counter() - t
     running = front.estimate.poses

@@ -1,0 +1,113 @@
+"""Group consistency of loop closures: pairwise consistency maximisation (PCM).
+
+A validator judges each loop alone, from the two scans; it cannot see that a loop between two
+identical doors one door apart is wrong. Mangelson et al. (2018, "Pairwise Consistency
+Maximization for Robust Multi-robot Map Merging") test loops in pairs instead: two loops
+(a₁→b₁, z₁) and (a₂→b₂, z₂) agree when the cycle they close with the graph between their
+ends, z₁ ∘ (b₁→b₂) ∘ z₂⁻¹ ∘ (a₂→a₁), is the identity within its covariance (a χ²(3) gate on the
+Mahalanobis distance), and the largest set of loops that all agree pairwise (the maximum
+clique of the consistency graph) is kept.
+
+Here the chains between the ends come from the running estimate, their covariance from the
+graph's Dijkstra projection (``uncertainty``). The estimate itself is one more member of the
+group, tested against each loop the same way (the cycle a→b through the loop and back through
+the graph) and weighted as a few loops: where the graph is sure where b lies relative to a,
+a loop that disagrees is rejected even when it is the only one; where it is not sure, a few
+loops that agree with one another outvote it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import networkx as nx
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2
+
+from vgm_studio.core import se2
+from vgm_studio.slam.config import ConsistencyConfig
+from vgm_studio.slam.uncertainty import Relative, UncertaintyGraph
+
+_ESTIMATE = -1
+
+
+@dataclass(frozen=True)
+class Loop:
+    """A loop closure to check: pose of b in a's frame and its covariance."""
+
+    a: int
+    b: int
+    measurement: NDArray[np.float64]
+    covariance: NDArray[np.float64]
+
+
+def consistent(
+    loops: Sequence[Loop],
+    poses: NDArray[np.float64],
+    graph: UncertaintyGraph,
+    config: ConsistencyConfig | None = None,
+) -> NDArray[np.bool_]:
+    """Which loops belong to the largest mutually consistent group (with the estimate).
+
+    Args:
+        loops: Loops the validator kept, not yet in the graph.
+        poses: (K, 3) the running estimate.
+        graph: The edges already in the graph, for the chains' covariances.
+        config: Gate and vote.
+    """
+    config = config or ConsistencyConfig()
+    if not loops:
+        return np.zeros(0, dtype=bool)
+    ends = sorted({x for loop in loops for x in (loop.a, loop.b)})
+    rel = dict(zip(ends, graph.relative(ends, len(poses)), strict=True))
+    gate = float(chi2.ppf(config.probability, 3))
+    votes = nx.Graph()
+    votes.add_node(_ESTIMATE, weight=config.estimate_weight)
+    for i, loop in enumerate(loops):
+        votes.add_node(i, weight=1)
+        if _fits_estimate(loop, poses, rel[loop.a]) <= gate:
+            votes.add_edge(_ESTIMATE, i)
+    for i in range(len(loops)):
+        for j in range(i + 1, len(loops)):
+            if _cycle(loops[i], loops[j], poses, rel) <= gate:
+                votes.add_edge(i, j)
+    clique, _ = nx.max_weight_clique(votes, weight="weight")
+    members = set(clique)
+    return np.array([i in members for i in range(len(loops))], dtype=bool)
+
+
+def _variances(cov: NDArray[np.float64]) -> tuple[float, float]:
+    return float(cov[0, 0] + cov[1, 1]) / 2.0, float(cov[2, 2])
+
+
+def _mahalanobis(error: NDArray[np.float64], position_var: float, heading_var: float) -> float:
+    e = np.asarray(error, dtype=np.float64)
+    return float((e[0] ** 2 + e[1] ** 2) / position_var + e[2] ** 2 / heading_var)
+
+
+def _fits_estimate(loop: Loop, poses: NDArray[np.float64], rel: Relative) -> float:
+    """Squared Mahalanobis distance of the loop from the estimate's a→b."""
+    vt, vr = _variances(loop.covariance)
+    error = se2.between(se2.between(poses[loop.a], poses[loop.b]), loop.measurement)
+    return _mahalanobis(error, vt + rel.position_var[loop.b], vr + rel.heading_var[loop.b])
+
+
+def _cycle(one: Loop, two: Loop, poses: NDArray[np.float64], rel: dict[int, Relative]) -> float:
+    """Squared Mahalanobis distance of the cycle two loops close with the graph."""
+    chain_b = se2.between(poses[one.b], poses[two.b])
+    chain_a = se2.between(poses[one.a], poses[two.a])
+    # b₂ in a₁'s frame, once through loop one, once through loop two.
+    via_one = se2.compose(one.measurement, chain_b)
+    via_two = se2.compose(chain_a, two.measurement)
+    error = se2.between(via_one, via_two)
+    vt1, vr1 = _variances(one.covariance)
+    vt2, vr2 = _variances(two.covariance)
+    # A heading error of a loop swings the chain after it by its length.
+    lever = float(chain_b[0] ** 2 + chain_b[1] ** 2)
+    position = (
+        vt1 + vt2 + vr1 * lever + rel[one.b].position_var[two.b] + rel[one.a].position_var[two.a]
+    )
+    heading = vr1 + vr2 + rel[one.b].heading_var[two.b] + rel[one.a].heading_var[two.a]
+    return _mahalanobis(error, position, heading)

@@ -1,0 +1,97 @@
+"""Loop candidates from where the robot may be: a window that grows with the graph's
+uncertainty, and place recognition that does not trust the estimate at all.
+
+Window: for each new keyframe b, every keyframe a at least ``loop_min_gap`` earlier whose
+estimated offset to b is within a Mahalanobis gate of "the same place". The gate's covariance
+is the graph's relative uncertainty between a and b (Dijkstra projection, see ``uncertainty``)
+plus a disc of radius ``loop_radius`` (the reach at which two scans still overlap), so where
+the graph is sure the search is the old fixed radius, and 200 m of unclosed corridor later it
+spans metres. The nearest candidates by that distance are matched over a search window of
+three σ, clamped.
+
+Place: the keyframe's scan descriptor against those of all earlier keyframes (a KD-tree of
+rotation-invariant keys; see ``matching.descriptor``); the estimate is not consulted, so a
+revisit is proposed even tens of metres off. Its window is centred on the descriptor's yaw.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2
+
+from vgm_studio.core import se2
+from vgm_studio.slam.config import FrontEndConfig
+from vgm_studio.slam.edges import EdgeSource
+from vgm_studio.slam.uncertainty import Relative, UncertaintyGraph
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A loop to match: pose guess of b in a's frame and the window around it.
+
+    Attributes:
+        linear: Half-width of the search window in x and y, metres.
+        angular: Half-width in heading, radians.
+    """
+
+    a: int
+    b: int
+    source: EdgeSource
+    guess: NDArray[np.float64]
+    linear: float
+    angular: float
+
+
+def _clamp(value: float, bounds: tuple[float, float]) -> float:
+    return float(min(max(value, bounds[0]), bounds[1]))
+
+
+def window_candidates(
+    block: range, poses: NDArray[np.float64], graph: UncertaintyGraph, config: FrontEndConfig
+) -> list[Candidate]:
+    """The window candidates of each keyframe of ``block``, nearest (by Mahalanobis) first."""
+    if block.stop - 1 - config.loop_min_gap < 0 or config.loops_per_keyframe == 0:
+        return []
+    gate = float(chi2.ppf(config.loop_gate, 2))
+    # With no uncertainty the gate reaches exactly loop_radius.
+    reach_var = config.loop_radius**2 / gate
+    out: list[Candidate] = []
+    keyframes = [b for b in block if b - config.loop_min_gap >= 0]
+    for b, rel in zip(keyframes, graph.relative(keyframes, len(poses)), strict=True):
+        out += _window_of(b, poses, rel, gate, reach_var, config)
+    return out
+
+
+def _window_of(
+    b: int,
+    poses: NDArray[np.float64],
+    rel: Relative,
+    gate: float,
+    reach_var: float,
+    config: FrontEndConfig,
+) -> list[Candidate]:
+    olds = np.arange(b - config.loop_min_gap + 1)
+    offset = se2.between(poses[olds], poses[b])
+    position_var = rel.position_var[olds]
+    heading_sigma = np.sqrt(rel.heading_var[olds])
+    with np.errstate(invalid="ignore"):
+        m2 = (offset[:, 0] ** 2 + offset[:, 1] ** 2) / (position_var + reach_var)
+    turn = math.radians(config.loop_max_angle_deg) + 3.0 * heading_sigma
+    ok = np.isfinite(m2) & (m2 <= gate) & (np.abs(offset[:, 2]) <= turn)
+    chosen = olds[ok][np.argsort(m2[ok], kind="stable")][: config.loops_per_keyframe]
+    lo_deg, hi_deg = config.window_angular_deg
+    return [
+        Candidate(
+            int(a),
+            b,
+            "window",
+            offset[a],
+            _clamp(3.0 * math.sqrt(position_var[a]), config.window_linear),
+            math.radians(_clamp(3.0 * math.degrees(heading_sigma[a]), (lo_deg, hi_deg))),
+        )
+        for a in chosen
+    ]

@@ -1,0 +1,107 @@
+"""How uncertain the graph is about one keyframe seen from another: Dijkstra projection.
+
+The relative covariance of two keyframes is bounded by composing the covariances of the edges
+along the most certain path between them (the "Dijkstra projection" of Bosse et al. 2003,
+Atlas, and Olson 2008): along an unclosed corridor it grows with every edge, and a closed loop
+gives a shortcut that shrinks it again. It ignores what parallel paths add, so it errs on the
+wide side, which is the safe side for a search window. Each edge counts its translational
+variance, its rotational variance, and its length; a heading error at one edge moves the far
+end by its lever arm, so over a path of length L with rotational variance Vθ the position
+variance grows by Vθ·L²/3 (the sum over a straight chain of equal steps).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from vgm_studio.graph.pose_graph import GraphEdge
+
+# A heading error acts over metres before the next loop: this lever ranks paths by the
+# position error they cause (it only chooses the path; the variances are summed exactly).
+_LEVER = 5.0
+
+
+@dataclass(frozen=True)
+class Relative:
+    """Uncertainty of every keyframe relative to one source keyframe.
+
+    Attributes:
+        position_var: (K,) isotropic position variance, m² (inf where unreachable).
+        heading_var: (K,) heading variance, rad².
+    """
+
+    position_var: NDArray[np.float64]
+    heading_var: NDArray[np.float64]
+
+
+class UncertaintyGraph:
+    """The kept edges' variances and lengths, searched for the most certain paths."""
+
+    def __init__(self) -> None:
+        self._a: list[int] = []
+        self._b: list[int] = []
+        self._vt: list[float] = []
+        self._vr: list[float] = []
+        self._len: list[float] = []
+        self._count = 1
+
+    def add(self, edge: GraphEdge) -> None:
+        """Adds a kept edge (sequential, odometry or loop)."""
+        cov = edge.covariance
+        self._a.append(edge.a)
+        self._b.append(edge.b)
+        self._vt.append(float(cov[0, 0] + cov[1, 1]) / 2.0)
+        self._vr.append(float(cov[2, 2]))
+        self._len.append(float(np.hypot(edge.measurement[0], edge.measurement[1])))
+        self._count = max(self._count, edge.a + 1, edge.b + 1)
+
+    def relative(self, sources: NDArray[np.int64] | list[int], count: int) -> list[Relative]:
+        """Uncertainty of keyframes ``0..count-1`` relative to each source."""
+        n = max(count, self._count)
+        a0, b0 = np.array(self._a, dtype=np.int64), np.array(self._b, dtype=np.int64)
+        vt0, vr0 = np.array(self._vt), np.array(self._vr)
+        weight0 = vt0 + vr0 * _LEVER**2 + 1e-12
+        lo, hi = np.minimum(a0, b0), np.maximum(a0, b0)
+        # Keep the most certain of parallel edges (csgraph would sum duplicates).
+        order = np.lexsort((weight0, lo, hi))
+        first = np.ones(len(order), dtype=bool)
+        first[1:] = (lo[order][1:] != lo[order][:-1]) | (hi[order][1:] != hi[order][:-1])
+        keep = order[first]
+        a, b, weight = a0[keep], b0[keep], weight0[keep]
+        vt, vr, ln = vt0[keep], vr0[keep], np.array(self._len)[keep]
+        graph = coo_matrix((weight, (a, b)), shape=(n, n)).tocsr()
+        dist, pred = dijkstra(graph, directed=False, indices=sources, return_predecessors=True)
+        values = [
+            coo_matrix((np.r_[v, v], (np.r_[a, b], np.r_[b, a])), shape=(n, n)).tocsr()
+            for v in (vt, vr, ln)
+        ]
+        return [_accumulate(d, p, values, count) for d, p in zip(dist, pred, strict=True)]
+
+
+def _accumulate(
+    dist: NDArray[np.float64], pred: NDArray[np.int32], values: list[Any], count: int
+) -> Relative:
+    """Sums each edge's variances and length from the source down the shortest-path tree."""
+    n = len(dist)
+    nodes = np.arange(n)
+    reach = np.isfinite(dist)
+    parent = np.where(reach & (pred >= 0), pred, nodes)
+    # Each node's own edge to its parent, then pointer jumping: after k rounds every node holds
+    # the sums over its 2^k nearest ancestors' edges, so log2(n) rounds sum whole paths.
+    acc = np.stack([np.asarray(v[parent, nodes]).ravel() for v in values], axis=1)
+    jump = parent
+    # The source (and an unreached node) points to itself and holds zero.
+    while not np.array_equal(jump, jump[jump]):
+        acc = acc + acc[jump]
+        jump = jump[jump]
+    acc[~reach] = np.inf
+    t, r, length = acc[:count, 0], acc[:count, 1], acc[:count, 2]
+    with np.errstate(invalid="ignore"):
+        position = np.where(np.isfinite(t), t + r * length**2 / 3.0, np.inf)
+    return Relative(position, r)
