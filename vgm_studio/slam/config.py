@@ -33,6 +33,15 @@ class FrontEndConfig:
         place_candidates: Place-recognition candidates per keyframe (0: none).
         place_angular_deg: Half-width in heading of a place candidate's window around the
             descriptor's yaw guess, degrees.
+        drift_sigma_xy: How far a kept sequential edge may be off, as the loop search sees it,
+            metres (added to the matcher's covariance). The graph's own floors
+            (``GraphConfig``) weight edges against each other and are far wider than a
+            scan matcher drifts, which would make every window the widest.
+        drift_sigma_theta_deg: …and in heading, degrees.
+        prefer_estimate: A loop is first matched in the smallest window around the estimate;
+            the full window's pose replaces it only if it scores this much higher (relative):
+            along a corridor or past a row of doors the full window holds poses that score
+            nearly as well as the right one.
         submap_keyframes: A loop is matched against a submap of its target keyframe and this
             many keyframes on each side of it.
         loop_min_gap: …and at least this many keyframes earlier.
@@ -56,6 +65,9 @@ class FrontEndConfig:
     window_angular_deg: tuple[float, float] = (10.0, 30.0)
     place_candidates: int = 1
     place_angular_deg: float = 15.0
+    drift_sigma_xy: float = 0.01
+    drift_sigma_theta_deg: float = 0.1
+    prefer_estimate: float = 0.1
     submap_keyframes: int = 5
     loop_min_gap: int = 20
     loops_per_keyframe: int = 2

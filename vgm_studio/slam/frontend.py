@@ -23,7 +23,9 @@ from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.graph.config import GraphConfig
 from vgm_studio.graph.pose_graph import GraphEdge, RunningEstimate, edge_covariance
+from vgm_studio.matching.correlative import LoopMatcher, SearchWindow
 from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.matching.submap import Submap
 from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
 from vgm_studio.slam.consistency import Loop, consistent
 from vgm_studio.slam.edges import SlamEdge, SlamEdgeKind
@@ -102,6 +104,8 @@ class FrontEnd:
         self.graph = graph
         self.consistency = consistency or ConsistencyConfig()
         self._uncertainty = UncertaintyGraph()
+        self.loop_matcher = LoopMatcher()
+        self._submaps: dict[tuple[int, int, int], Submap] = {}
         self.estimate = RunningEstimate(odometry[0], graph)
         self.edges: list[SlamEdge] = []
         self._false = false_loop_pairs(odometry, config) if config.false_loops else {}
@@ -148,18 +152,22 @@ class FrontEnd:
                 graph_edge(e, self.graph) if e.kept else odometry_edge(e.a, e.b, odo, self.graph)
             )
             self.estimate.add_keyframe(se2.compose(self.estimate.poses[e.a], factor.measurement))
-            self._add(factor)
+            self.estimate.add_edge(factor)
+            self._uncertainty.add(self._drift(e) if e.kept else factor)
         self.edges.extend(edges)
         self.estimate.update()
 
     def _loops(self, block: range) -> None:
+        # Submaps are placed by the estimate, which moves when loops close: built per block.
+        self._submaps.clear()
         poses = self.estimate.poses
         candidates = window_candidates(block, poses, self._uncertainty, self.config)
         candidates += self._injected(block)
         edges = [self._match_loop(c) for c in candidates]
         self.validate(edges)
         for e in edges:
-            e.validated = e.kept
+            # A failed match returns its guess: no measurement, whatever a validator says.
+            e.kept = e.validated = e.kept and e.match.covariance is not None
         self._check_consistency([e for e in edges if e.kept], poses)
         kept = [e for e in edges if e.kept]
         for e in kept:
@@ -179,9 +187,30 @@ class FrontEnd:
         return out
 
     def _match_loop(self, c: Candidate) -> SlamEdge:
-        edge = self._match("loop", c.a, c.b, c.guess, injected=c.source == "injected")
-        edge.source = c.source
-        return edge
+        """Matches b against a submap of the keyframes around a, over the candidate's window."""
+        submap = self._submap(c.a, c.b)
+        target, scan = self.scans[c.a], self.scans[c.b]
+        cfg = self.config
+        small = SearchWindow(cfg.window_linear[0], math.radians(cfg.window_angular_deg[0]))
+        result = self.loop_matcher.match(submap, target, scan, c.guess, small)
+        if c.linear > small.linear or c.angular > small.angular:
+            wide = self.loop_matcher.match(
+                submap, target, scan, c.guess, SearchWindow(c.linear, c.angular)
+            )
+            near = result.score or 0.0
+            if (wide.score or 0.0) > (1.0 + cfg.prefer_estimate) * near:
+                result = wide
+        return SlamEdge("loop", c.a, c.b, c.guess, result, c.source == "injected", source=c.source)
+
+    def _submap(self, a: int, b: int) -> Submap:
+        # Keyframes near b would match b trivially; the submap stays well before it.
+        last = max(a, min(a + self.config.submap_keyframes, b - self.config.loop_min_gap))
+        members = range(max(0, a - self.config.submap_keyframes), last + 1)
+        key = (a, members.start, members.stop)
+        if key not in self._submaps:
+            poses = se2.between(self.estimate.poses[a], self.estimate.poses[members])
+            self._submaps[key] = Submap.from_scans([self.scans[k] for k in members], poses)
+        return self._submaps[key]
 
     def _check_consistency(self, loops: list[SlamEdge], poses: NDArray[np.float64]) -> None:
         if not self.consistency.enabled or not loops:
@@ -191,6 +220,16 @@ class FrontEnd:
         for e, ok in zip(loops, flags, strict=True):
             e.consistency = "kept" if ok else "rejected"
             e.kept = bool(ok)
+
+    def _drift(self, edge: SlamEdge) -> GraphEdge:
+        """A kept sequential edge as the loop search sees it: the matcher's covariance plus a
+        scan matcher's drift, not the graph's wider floors."""
+        cov = edge.match.covariance
+        base = np.zeros((3, 3)) if cov is None else np.asarray(cov, dtype=np.float64)
+        floor = [self.config.drift_sigma_xy**2] * 2 + [
+            math.radians(self.config.drift_sigma_theta_deg) ** 2
+        ]
+        return GraphEdge(edge.a, edge.b, edge.estimate, base + np.diag(floor), True)
 
     def _add(self, factor: GraphEdge) -> None:
         self.estimate.add_edge(factor)
