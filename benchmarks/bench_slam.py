@@ -1,16 +1,23 @@
-"""vgm-studio slam on the raw Intel log: every validator, with and without GNC, side by side.
+"""vgm-studio slam on every log with a reference, and on simulated worlds with false loops.
 
-Each row is one whole run of the command on two cores (odometry, front end, both graphs,
-maps, JSON and a rerun recording), scored with the Freiburg relations (Kümmerle et al. 2009).
-The rgb-baseline and score checkpoints are the model benchmark's (build/models, trained here
-with bench_models.py's CPU settings when missing); vgmnet is the bundled default; reference
-validates against GMapping's corrected poses (intel.gfs.log).
+One row per log, each a whole run of the command in its own process pinned to two cores
+(odometry, front end, both graphs, JSON; maps where a picture is wanted), with the bundled
+vgmnet validator and ``--robust none``:
 
-Run: python benchmarks/bench_slam.py [--only vgmnet] [--no-gnc]
+- ``intel``: the raw Intel log scored with the Freiburg relations (Kümmerle et al. 2009).
+- the ten GMapping-corrected radish logs: SLAM from their raw odometry (the ODOM lines; the
+  default ``--poses auto`` reads a corrected log that way), scored with relations drawn from
+  their corrected poses (``--reference`` scoring). ``--poses odometry`` would read the
+  corrected FLASER poses as odometry, so it is not used here.
+- ``mit-csail``: no reference; loops proposed and kept, and the map.
+- simulated ``office``, ``repetitive`` and ``corridor`` worlds, seeds 1–4, with 10 injected
+  false loop closures each, scored against the simulator's TRUEPOS.
 
-Targets (issue 4): with --validator vgmnet, mean translational error ≤ 0.05 m and the whole
-run ≤ 300 s on two CPU cores. Anchors (Kümmerle et al. 2009, Intel): scan matching alone
-0.220 m, graph mapping 0.031 m.
+Run: python benchmarks/bench_slam.py [--logs intel,office-1,...] [--list]
+
+Targets (issue 11): Intel after ≤ 0.025 m and ≤ 60 s; each corrected log after ≤ 0.10 m; no
+injected false loop kept. Anchors (Intel): Kümmerle et al.'s graph mapping 0.031 m,
+Cartographer 0.0229 m (Hess et al. 2016), Graph FLIRT 0.02 m.
 """
 
 from __future__ import annotations
@@ -25,131 +32,163 @@ from pathlib import Path
 from _common import REPO, datasets_dir, machine, pin_to_cores, table
 
 OUT = REPO / "build" / "slam"
-MODELS = REPO / "build" / "models"
-GFS_OFFSET = "976052857.33753"  # intel.gfs.log counts from the start of intel.clf
-VALIDATORS = ("none", "vgmnet", "rgb-baseline", "score", "reference")
-TARGET_M, TARGET_S = 0.05, 300.0
-
-# Runs the command in a fresh process; registers it on the CLI if the app does not yet.
-
-
-def _model(name: str) -> Path:
-    """The model benchmark's checkpoint, trained with its CPU settings when missing."""
-    path = MODELS / f"{name}.pt"
-    if path.exists():
-        return path
-    from edge_sets import training_edges
-
-    from vgm_studio.model.training import TrainConfig, read_labelled, train
-
-    data = read_labelled(training_edges(), progress=False)
-    slow = name == "rgb-baseline"
-    config = TrainConfig(
-        model=name,
-        device="cpu",
-        epochs=6 if slow else 12,
-        epoch_size=3000 if slow else 6000,
-    )
-    train(data, config, path, progress=False, log=print)
-    return path
+CORRECTED = (
+    "acapulco",
+    "belgioioso",
+    "csail",
+    "edmonton",
+    "fhw",
+    "freiburg-101",
+    "freiburg-campus",
+    "infinite-corridor",
+    "orebro",
+    "seattle",
+)
+WORLDS = ("office", "repetitive", "corridor")
+SEEDS = (1, 2, 3, 4)
+PICTURES = ("infinite-corridor", "mit-csail", "intel")
+TARGET_INTEL_M, TARGET_INTEL_S, TARGET_CORRECTED_M = 0.025, 60.0, 0.10
 
 
-def run(validator: str, robust: str) -> dict:
-    intel = datasets_dir() / "intel"
-    tag = f"{validator}-{robust}"
-    args = [
-        "slam", intel / "intel.clf",
-        "--validator", validator,
-        "--robust", robust,
-        "--relations", intel / "intel.relations",
-        "--json", OUT / f"{tag}.json",
-        "--map-png", OUT / f"maps-{tag}",
-        "--record", OUT / f"{tag}.rrd",
-    ]  # fmt: skip
-    if validator in ("rgb-baseline", "score"):
-        args += ["--model", _model(validator)]
-    if validator == "reference":
-        args += ["--reference", intel / "intel.gfs.log", "--time-offset", GFS_OFFSET]
+def rows_known() -> list[str]:
+    sims = [f"{w}-{s}" for w in WORLDS for s in SEEDS]
+    return ["intel", *CORRECTED, "mit-csail", *sims]
+
+
+def _simulated(name: str) -> Path:
+    from vgm_studio.simulation.simulate import SimConfig, simulate
+
+    world, seed = name.rsplit("-", 1)
+    folder = OUT / "sim" / name
+    log = folder / f"{world}-seed{seed}.log"
+    if not log.exists():
+        folder.mkdir(parents=True, exist_ok=True)
+        log = simulate(SimConfig(preset=world, seed=int(seed)), folder)
+    return log
+
+
+def arguments(name: str) -> list[str | Path]:
+    data = datasets_dir()
+    if name == "intel":
+        args: list[str | Path] = [
+            data / "intel" / "intel.clf", "--relations", data / "intel" / "intel.relations",
+        ]  # fmt: skip
+    elif name in CORRECTED:
+        args = [data / "radish-corrected" / f"{name}-corrected.log"]
+    elif name == "mit-csail":
+        args = [data / "mit-csail" / "mit-csail.clf"]
+    else:
+        args = [_simulated(name), "--inject-false-loops", "10", "--seed", name.rsplit("-")[-1]]
+    if name in PICTURES:
+        args += ["--map-png", OUT / f"maps-{name}", "--resolution", "0.1"]
+    return [*args, "--robust", "none", "--json", OUT / f"{name}.json"]
+
+
+def run(name: str) -> dict:
     start = time.perf_counter()
     proc = subprocess.run(
-        [sys.executable, "-m", "vgm_studio.tools.cmd", *map(str, args)],
+        [sys.executable, "-m", "vgm_studio.tools.cmd", "slam", *map(str, arguments(name))],
         capture_output=True,
         text=True,
     )
     wall = time.perf_counter() - start
     if proc.returncode:
-        raise SystemExit(f"{tag} failed:\n{proc.stderr[-2000:]}")
-    doc = json.loads((OUT / f"{tag}.json").read_text())
+        return {"error": proc.stderr.strip().splitlines()[-1] if proc.stderr else "failed"}
+    doc = json.loads((OUT / f"{name}.json").read_text())
     doc["wall"] = wall
-    doc["rrd_mb"] = (OUT / f"{tag}.rrd").stat().st_size / 1e6
     return doc
 
 
-def row(validator: str, robust: str, d: dict) -> list[str]:
-    b, a = d["before"], d["after"]
+def _err(d: dict | None) -> str:
+    if not d:
+        return "–"
+    return (
+        f"{d['trans_mean']:.3f} ± {d['trans_std']:.3f} m, "
+        f"{d['rot_mean_deg']:.2f} ± {d['rot_std_deg']:.2f}°"
+    )
+
+
+def row(name: str, d: dict) -> list[str]:
+    if "error" in d:
+        return [name, d["error"][:60], *[""] * 7]
+    by = d["loops_by_source"]
+    false = (
+        f"{d['injected_false_loops_kept']}/{d['injected_false_loops']}" if by["injected"] else ""
+    )
     return [
-        validator,
-        robust,
-        f"{b['trans_mean']:.4f} ± {b['trans_std']:.4f}",
-        f"{a['trans_mean']:.4f} ± {a['trans_std']:.4f}",
-        f"{a['rot_mean_deg']:.3f} ± {a['rot_std_deg']:.3f}",
-        f"{d['loops_kept']}/{d['loops_total']}",
-        f"{d['edges_kept']}/{d['edges_rejected']}",
-        str(d["gnc_rejected"]["after"]) if robust == "gnc" else "",
+        name,
+        _err(d.get("after")),
+        _err(d.get("before")),
+        str(by["window"]),
+        str(by["place"]),
+        str(d["loops_validator_kept"]),
+        str(d["loops_kept"]),
+        false,
         f"{d['wall']:.0f}",
-        f"{d['rrd_mb']:.0f}",
     ]
+
+
+def verdicts(results: dict[str, dict]) -> list[str]:
+    out = []
+    intel = results.get("intel")
+    if intel and "after" in intel:
+        err, wall = intel["after"]["trans_mean"], intel["wall"]
+        met = err <= TARGET_INTEL_M and wall <= TARGET_INTEL_S
+        out.append(
+            f"Intel ≤ {TARGET_INTEL_M} m and ≤ {TARGET_INTEL_S:.0f} s: {err:.4f} m, {wall:.0f} s: "
+            + ("met" if met else "NOT met")
+        )
+    corrected = {n: results[n] for n in CORRECTED if n in results and "after" in results[n]}
+    if corrected:
+        missed = [n for n, d in corrected.items() if d["after"]["trans_mean"] > TARGET_CORRECTED_M]
+        out.append(
+            f"corrected logs ≤ {TARGET_CORRECTED_M} m: {len(corrected) - len(missed)} of "
+            f"{len(corrected)} met" + (f" (missed: {', '.join(missed)})" if missed else "")
+        )
+    sims = [d for n, d in results.items() if n not in CORRECTED and "injected_false_loops" in d]
+    sims = [d for d in sims if d["injected_false_loops"]]
+    if sims:
+        kept = sum(d["injected_false_loops_kept"] for d in sims)
+        out.append(f"false loops kept over {len(sims)} simulated runs: {kept}")
+    return out
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--only", choices=VALIDATORS, action="append")
-    parser.add_argument("--no-gnc", action="store_true", help="Skip the --robust gnc runs.")
+    parser.add_argument("--logs", help="Comma-separated rows to run (see --list); default all.")
+    parser.add_argument("--list", action="store_true", help="List the row names and stop.")
     args = parser.parse_args()
+    if args.list:
+        print("\n".join(rows_known()))
+        return
+    names = args.logs.split(",") if args.logs else rows_known()
+    unknown = sorted(set(names) - set(rows_known()))
+    if unknown:
+        raise SystemExit(f"unknown rows: {', '.join(unknown)} (see --list)")
     pin_to_cores(2)
     OUT.mkdir(parents=True, exist_ok=True)
-    rows, results = [], {}
-    for validator in args.only or VALIDATORS:
-        for robust in ("none",) if args.no_gnc else ("none", "gnc"):
-            d = run(validator, robust)
-            results[(validator, robust)] = d
-            rows.append(row(validator, robust, d))
-            print(
-                f"{validator} {robust}: {d['after']['trans_mean']:.4f} m, {d['wall']:.0f} s",
-                file=sys.stderr,
-            )
-    first = next(iter(results.values()))
-    print(
-        f"# intel.clf ({first['scans']} scans, {first['keyframes']} keyframes) with "
-        "intel.relations; whole runs (maps, JSON, recording) on 2 cores"
-    )
+    results, rows = {}, []
+    for name in names:
+        d = run(name)
+        results[name] = d
+        rows.append(row(name, d))
+        print(f"{name}: {rows[-1][1]} ({rows[-1][-1]} s)", file=sys.stderr, flush=True)
+    print("# vgm-studio slam, --validator vgmnet (bundled), --robust none; whole runs on 2 cores")
     print(f"# {machine()}")
-    print(
-        table(
-            [
-                "validator",
-                "robust",
-                "before m (mean ± std)",
-                "after m (mean ± std)",
-                "after ° (mean ± std)",
-                "loops kept",
-                "edges kept/rejected",
-                "GNC rejected",
-                "wall s",
-                "rrd MB",
-            ],
-            rows,
-        )
-    )
-    print("anchors (Kümmerle et al. 2009, Intel): scan matching 0.220 m, graph mapping 0.031 m")
-    target = results.get(("vgmnet", "none"))
-    if target is not None:
-        err, wall = target["after"]["trans_mean"], target["wall"]
-        met = err <= TARGET_M and wall <= TARGET_S
-        print(
-            f"target vgmnet ≤ {TARGET_M} m and ≤ {TARGET_S:.0f} s: {err:.4f} m, {wall:.0f} s: "
-            + ("met" if met else "NOT met")
-        )
+    header = [
+        "log",
+        "after (mean ± std)",
+        "before (mean ± std)",
+        "by window",
+        "by place",
+        "validator kept",
+        "kept after consistency",
+        "false kept",
+        "wall s",
+    ]
+    print(table(header, rows))
+    for line in verdicts(results):
+        print(line)
 
 
 if __name__ == "__main__":

@@ -54,6 +54,9 @@ def runs(office, tmp_path_factory) -> dict[str, dict]:
     results = {}
     for validator in ("none", "vgmnet", "reference"):
         extra: list[str | Path] = []
+        if validator == "none":
+            # No validation and no consistency check: every candidate goes in.
+            extra = ["--consistency", "none"]
         if validator == "vgmnet":
             extra = ["--map-png", out / "maps", "--record", out / "run.rrd"]
         run(
@@ -135,7 +138,16 @@ def test_recording_reads_back_with_every_entity(runs):
         return count
 
     assert strips("/world/edges/kept") == doc["edges_kept"]
-    assert strips("/world/edges/rejected") == doc["edges_rejected"]
+    rejected = strips("/world/edges/rejected")
+    inconsistent = strips("/world/edges/inconsistent")
+    assert rejected + inconsistent == doc["edges_rejected"]
+    assert inconsistent == doc["loops_consistency_rejected"]
+    loops = [e for e in doc["edges"] if e["kind"] == "loop"]
+    assert len(loops) == doc["loops_total"] and len(doc["edges"]) == doc["edges_total"]
+    assert {e["source"] for e in loops} <= {"window", "place", "injected"}
+    assert sum(e["source"] == "injected" for e in loops) == FALSE_LOOPS
+    assert all(e["consistency"] == "not-checked" for e in loops if e["validator"] == "rejected")
+    assert sum(e["validator"] == "kept" for e in loops) == doc["loops_validator_kept"]
     rejected_seq = doc["edges_rejected"] - (doc["loops_total"] - doc["loops_kept"])
     images = sum(c.to_record_batch().num_rows for c in chunks if c.entity_path == "/inspector/vgm")
     assert images == doc["loops_total"] + rejected_seq

@@ -36,6 +36,44 @@ def side_by_side(grids: Sequence[OccupancyGrid], titles: Sequence[str]) -> NDArr
     return np.hstack(panels[:-1])
 
 
+Segment = tuple[NDArray[np.float64], NDArray[np.float64], str]
+
+
+def edges_picture(
+    grid: OccupancyGrid, segments: Sequence[Segment], colours: dict[str, tuple[int, int, int]]
+) -> NDArray[np.uint8]:
+    """The map in colour with edges drawn on it and a legend of their kinds with counts.
+
+    Args:
+        grid: The map.
+        segments: (start xy, end xy, kind) of each edge, in world metres.
+        colours: RGB of each kind, in legend order; kinds without a segment are left out.
+    """
+    image = cv2.cvtColor(picture(grid), cv2.COLOR_GRAY2BGR)
+    height = image.shape[0]
+
+    def pixel(xy: NDArray[np.float64]) -> tuple[int, int]:
+        col = (xy[0] - grid.origin[0]) / grid.resolution
+        row = (xy[1] - grid.origin[1]) / grid.resolution
+        return round(float(col)), round(float(height - 1 - row))
+
+    counts = {kind: sum(s[2] == kind for s in segments) for kind in colours}
+    # Kept edges last, so that a rejected loop does not hide under the kept ones.
+    for start, end, kind in sorted(segments, key=lambda s: list(colours).index(s[2])):
+        r, g, b = colours[kind]
+        cv2.line(image, pixel(start), pixel(end), (b, g, r), 1, cv2.LINE_AA)
+    shown = [k for k in colours if counts[k]]
+    box_h = 8 + 22 * len(shown)
+    cv2.rectangle(image, (0, 0), (300, box_h), (255, 255, 255), -1)
+    for i, kind in enumerate(shown):
+        r, g, b = colours[kind]
+        y = 20 + 22 * i
+        cv2.line(image, (8, y - 5), (36, y - 5), (b, g, r), 3)
+        text = f"{kind} ({counts[kind]})"
+        cv2.putText(image, text, (44, y), cv2.FONT_HERSHEY_SIMPLEX, 0.5, 0, 1, cv2.LINE_AA)
+    return np.asarray(image, dtype=np.uint8)
+
+
 def write_png(path: Path, image: NDArray[np.uint8]) -> None:
     """Writes a PNG.
 
@@ -47,9 +85,20 @@ def write_png(path: Path, image: NDArray[np.uint8]) -> None:
         raise InputError(path, "cannot write this picture")
 
 
-def write_maps(folder: Path, grids: dict[str, OccupancyGrid]) -> list[Path]:
-    """Writes ``<name>.png`` for each grid and ``side-by-side.png`` of them all."""
+def write_maps(
+    folder: Path,
+    grids: dict[str, OccupancyGrid],
+    edges: tuple[str, Sequence[Segment], dict[str, tuple[int, int, int]]] | None = None,
+) -> list[Path]:
+    """Writes ``<name>.png`` for each grid and ``side-by-side.png`` of them all, and with
+    ``edges`` (map name, segments, colours) ``edges.png``: that map with the edges and a legend.
+    """
     written = []
+    if edges is not None:
+        name, segments, colours = edges
+        path = folder / "edges.png"
+        write_png(path, edges_picture(grids[name], segments, colours))
+        written.append(path)
     for name, grid in grids.items():
         path = folder / f"{name}.png"
         write_png(path, picture(grid))

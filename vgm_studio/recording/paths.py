@@ -11,6 +11,7 @@ SCAN = f"{WORLD}/scan"
 ROBOT = f"{WORLD}/robot"
 EDGES_KEPT = f"{WORLD}/edges/kept"
 EDGES_REJECTED = f"{WORLD}/edges/rejected"
+EDGES_INCONSISTENT = f"{WORLD}/edges/inconsistent"
 INSPECTED = f"{WORLD}/edges/inspected"
 
 INSPECTOR = "/inspector"

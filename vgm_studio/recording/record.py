@@ -2,10 +2,12 @@
 
 Everything in the world is in world coordinates under ``/world`` (which flips y, so the 2D
 view shows +y up as maps are read): the maps as images placed by a transform, the three
-trajectories, the scan and robot of each keyframe, and the edges as two batched line-strip
-entities (kept, rejected), each edge logged at the keyframe that made it. Every loop edge and
-every rejected edge also goes to the inspector: its VGM as a PNG (8-bit, compact), its
-verdict and p(success), on the keyframe timeline and on a timeline of its own.
+trajectories, the scan and robot of each keyframe, and the edges as three batched line-strip
+entities (kept; rejected by the validator; passed by the validator but rejected by the
+consistency check), each edge logged at the keyframe that made it, coloured by kind and by
+where a loop candidate came from. Every loop edge and every rejected edge also goes to the
+inspector: its VGM as a PNG (8-bit, compact), its source, both decisions and p(success), on
+the keyframe timeline and on a timeline of its own.
 """
 
 from __future__ import annotations
@@ -35,8 +37,10 @@ COLOURS = {
     "before": (230, 120, 40),
     "after": (40, 160, 240),
     "sequential": (90, 200, 120),
-    "loop": (40, 120, 255),
+    "window": (40, 120, 255),
+    "place": (20, 200, 200),
     "rejected": (230, 40, 40),
+    "inconsistent": (255, 150, 0),
     "injected": (220, 40, 220),
 }
 
@@ -130,7 +134,8 @@ def _edges(rec: rr.RecordingStream, result: SlamResult) -> None:
     poses = result.after.poses
     for entity, chosen in (
         (P.EDGES_KEPT, [e for e in result.edges if e.kept]),
-        (P.EDGES_REJECTED, [e for e in result.edges if not e.kept]),
+        (P.EDGES_REJECTED, [e for e in result.edges if not e.validated]),
+        (P.EDGES_INCONSISTENT, [e for e in result.edges if e.consistency == "rejected"]),
     ):
         if not chosen:
             continue
@@ -151,9 +156,11 @@ def _edges(rec: rr.RecordingStream, result: SlamResult) -> None:
 def _colour(edge: SlamEdge) -> str:
     if edge.injected:
         return "injected"
-    if not edge.kept:
+    if not edge.validated:
         return "rejected"
-    return edge.kind
+    if edge.consistency == "rejected":
+        return "inconsistent"
+    return "sequential" if edge.kind == "sequential" else edge.source
 
 
 def _vgm_png(log: ScanLog, result: SlamResult, edge: SlamEdge) -> bytes:
@@ -169,10 +176,12 @@ def _verdict(edge: SlamEdge) -> str:
     m = edge.match
     verdict = "kept" if edge.kept else "rejected"
     p = "n/a" if np.isnan(edge.p_success) else f"{edge.p_success:.3f}"
+    validator = "kept" if edge.validated else "rejected"
     return (
-        f"**{verdict}** {edge.kind} edge, keyframes {edge.a} → {edge.b}"
+        f"**{verdict}** {edge.kind} edge, keyframes {edge.a} → {edge.b}, source {edge.source}"
         f"{' (injected false loop)' if edge.injected else ''}\n\n"
-        f"p(success) {p} · inlier ratio {m.inlier_ratio:.2f} · residual {m.residual:.4f} m\n\n"
+        f"validator {validator} (p(success) {p}) · consistency {edge.consistency}\n\n"
+        f"inlier ratio {m.inlier_ratio:.2f} · residual {m.residual:.4f} m\n\n"
         f"estimate x {edge.estimate[0]:.3f} m, y {edge.estimate[1]:.3f} m, "
         f"θ {np.degrees(edge.estimate[2]):.2f}°"
     )
@@ -188,7 +197,7 @@ def _inspector(rec: rr.RecordingStream, log: ScanLog, result: SlamResult) -> Non
             P.VGM, rr.EncodedImage(contents=_vgm_png(log, result, edge), media_type="image/png")
         )
         rec.log(P.VERDICT, rr.TextDocument(_verdict(edge), media_type="text/markdown"))
-        colour = COLOURS[_colour(edge)] if not edge.kept or edge.injected else COLOURS["loop"]
+        colour = COLOURS[_colour(edge)]
         rec.log(P.INSPECTED, rr.LineStrips2D([_strip(edge, poses)], colors=[colour], radii=[0.08]))
         if not np.isnan(edge.p_success):
             rec.log(f"{P.INSPECTOR}/p_success", rr.Scalars([edge.p_success]))
@@ -198,9 +207,12 @@ def _inspector(rec: rr.RecordingStream, log: ScanLog, result: SlamResult) -> Non
 def _metrics(
     rec: rr.RecordingStream, result: SlamResult, errors: dict[str, RelationErrors] | None
 ) -> None:
-    loops = np.array([e.kind == "loop" for e in result.edges])
-    kept = np.array([e.kept for e in result.edges])
-    frames = np.array([e.b for e in result.edges])
+    # Typed, so that a run without edges (a robot that never moved) gives empty arrays
+    # that still combine as flags.
+    loops = np.array([e.kind == "loop" for e in result.edges], dtype=bool)
+    kept = np.array([e.kept for e in result.edges], dtype=bool)
+    inconsistent = np.array([e.consistency == "rejected" for e in result.edges], dtype=bool)
+    frames = np.array([e.b for e in result.edges], dtype=np.int64)
     order = np.argsort(frames, kind="stable")
     keyframes = np.arange(len(result.keyframes))
     # Edges made up to and including each keyframe.
@@ -208,6 +220,7 @@ def _metrics(
     series = {
         "loops_kept": loops & kept,
         "loops_rejected": loops & ~kept,
+        "loops_inconsistent": inconsistent,
         "sequential_rejected": ~loops & ~kept,
     }
     for name, flags in series.items():

@@ -42,6 +42,10 @@ class FrontEndConfig:
             the full window's pose replaces it only if it scores this much higher (relative):
             along a corridor or past a row of doors the full window holds poses that score
             nearly as well as the right one.
+        loop_min_score: The loop matcher searches only poses whose correlative score (mean
+            likelihood under the scan, 0..1) reaches this; a pair that does not overlap then
+            fails at once instead of being searched pose by pose (with no bound to prune on,
+            branch and bound over a 6 m window visits every pose).
         submap_keyframes: A loop is matched against a submap of its target keyframe and this
             many keyframes on each side of it.
         loop_min_gap: …and at least this many keyframes earlier.
@@ -65,9 +69,10 @@ class FrontEndConfig:
     window_angular_deg: tuple[float, float] = (10.0, 30.0)
     place_candidates: int = 1
     place_angular_deg: float = 15.0
-    drift_sigma_xy: float = 0.01
-    drift_sigma_theta_deg: float = 0.1
+    drift_sigma_xy: float = 0.005
+    drift_sigma_theta_deg: float = 0.03
     prefer_estimate: float = 0.1
+    loop_min_score: float = 0.3
     submap_keyframes: int = 5
     loop_min_gap: int = 20
     loops_per_keyframe: int = 2

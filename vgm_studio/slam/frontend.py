@@ -23,7 +23,7 @@ from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.graph.config import GraphConfig
 from vgm_studio.graph.pose_graph import GraphEdge, RunningEstimate, edge_covariance
-from vgm_studio.matching.correlative import LoopMatcher, SearchWindow
+from vgm_studio.matching.correlative import CorrelativeConfig, LoopMatcher, SearchWindow
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.matching.submap import Submap
 from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
@@ -104,7 +104,7 @@ class FrontEnd:
         self.graph = graph
         self.consistency = consistency or ConsistencyConfig()
         self._uncertainty = UncertaintyGraph()
-        self.loop_matcher = LoopMatcher()
+        self.loop_matcher = LoopMatcher(CorrelativeConfig(min_score=config.loop_min_score))
         self._submaps: dict[tuple[int, int, int], Submap] = {}
         self.estimate = RunningEstimate(odometry[0], graph)
         self.edges: list[SlamEdge] = []

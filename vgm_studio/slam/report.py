@@ -15,9 +15,11 @@ from vgm_studio.datasets.scans import ScanLog
 from vgm_studio.graph.metrics import RelationErrors, relation_errors
 from vgm_studio.maps.config import MapConfig
 from vgm_studio.maps.occupancy import OccupancyGrid, build_map
+from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.pipeline import SlamResult
 
 TRAJECTORIES = ("odometry", "before", "after")
+_SOURCES = ("window", "place", "injected")
 
 
 def keyframe_trajectories(result: SlamResult) -> dict[str, NDArray[np.float64]]:
@@ -38,6 +40,37 @@ def run_maps(log: ScanLog, result: SlamResult, config: MapConfig) -> dict[str, O
     }
 
 
+# The loops on the edges map, in drawing order (rejected under kept), as RGB.
+LOOP_COLOURS: dict[str, tuple[int, int, int]] = {
+    "rejected by validator": (230, 40, 40),
+    "rejected by consistency": (255, 150, 0),
+    "injected, kept": (220, 40, 220),
+    "kept (window)": (40, 120, 255),
+    "kept (place)": (20, 170, 60),
+}
+
+
+def loop_segments(
+    result: SlamResult,
+) -> list[tuple[NDArray[np.float64], NDArray[np.float64], str]]:
+    """Each loop edge as a segment of the ``after`` map, named by its decisions."""
+    poses = result.after.poses
+    out = []
+    for e in result.edges:
+        if e.kind != "loop":
+            continue
+        if not e.validated:
+            kind = "rejected by validator"
+        elif e.consistency == "rejected":
+            kind = "rejected by consistency"
+        elif e.injected:
+            kind = "injected, kept"
+        else:
+            kind = f"kept ({e.source})"
+        out.append((poses[e.a, :2], poses[e.b, :2], kind))
+    return out
+
+
 @dataclass
 class EdgeCounts:
     """How many edges of each kind validation kept and rejected."""
@@ -49,7 +82,9 @@ class EdgeCounts:
     loops_kept: int
     injected: int
     injected_kept: int
-    gnc_rejected: dict[str, int] = field(default_factory=dict)
+    by_source: dict[str, int] = field(default_factory=dict)
+    validated: int = 0
+    consistency_rejected: int = 0
 
     @classmethod
     def of(cls, result: SlamResult) -> EdgeCounts:
@@ -63,6 +98,11 @@ class EdgeCounts:
             loops_kept=sum(e.kept for e in loops),
             injected=len(injected),
             injected_kept=sum(e.kept for e in injected),
+            by_source={
+                s: sum(e.source == s for e in loops) for s in ("window", "place", "injected")
+            },
+            validated=sum(e.validated for e in loops),
+            consistency_rejected=sum(e.consistency == "rejected" for e in loops),
         )
 
 
@@ -96,6 +136,9 @@ def summary(
             "loops_kept": counts.loops_kept,
             "injected_false_loops": counts.injected,
             "injected_false_loops_kept": counts.injected_kept,
+            "loops_by_source": counts.by_source,
+            "loops_validator_kept": counts.validated,
+            "loops_consistency_rejected": counts.consistency_rejected,
             "gnc_rejected": {
                 "before": int(np.sum(result.before.weights < 0.5)),
                 "after": int(np.sum(result.after.weights < 0.5)),
@@ -105,9 +148,25 @@ def summary(
             "seconds": seconds,
             "stage_seconds": result.seconds,
             "settings": settings,
+            "edges": [edge_json(e) for e in result.edges],
         }
     )
     return _finite(out)
+
+
+def edge_json(edge: SlamEdge) -> dict[str, Any]:
+    """One edge's provenance and both decisions, for the ``--json`` document."""
+    return {
+        "kind": edge.kind,
+        "a": edge.a,
+        "b": edge.b,
+        "source": edge.source,
+        "validator": "kept" if edge.validated else "rejected",
+        "p_success": edge.p_success,
+        "consistency": edge.consistency,
+        "kept": edge.kept,
+        "estimate": [float(v) for v in edge.estimate],
+    }
 
 
 def _finite(value: Any) -> Any:
@@ -137,7 +196,9 @@ def edge_line(result: SlamResult) -> str:
     c = EdgeCounts.of(result)
     text = (
         f"edges: {c.total} matched, {c.kept} kept, {c.rejected} rejected; "
-        f"loops: {c.loops_kept} of {c.loops} kept"
+        f"loops: {c.loops} proposed ({c.by_source['window']} by window, "
+        f"{c.by_source['place']} by place), {c.validated} passed the validator, "
+        f"{c.loops_kept} kept after the consistency check"
     )
     if c.injected:
         text += f"; injected false loops: {c.injected_kept} of {c.injected} kept"

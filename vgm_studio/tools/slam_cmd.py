@@ -33,6 +33,11 @@ class RobustChoice(str, Enum):
     gnc = "gnc"
 
 
+class ConsistencyChoice(str, Enum):
+    pcm = "pcm"
+    none = "none"
+
+
 class PosesChoice(str, Enum):
     auto = "auto"
     odometry = "odometry"
@@ -96,6 +101,13 @@ def slam(
         RobustChoice,
         typer.Option(help="Back-end outlier handling: none, huber kernels, or gnc (TLS)."),
     ] = RobustChoice.none,
+    consistency: Annotated[
+        ConsistencyChoice,
+        typer.Option(
+            help="Group check of the loops the validator kept: pcm (pairwise consistency "
+            "maximisation) or none."
+        ),
+    ] = ConsistencyChoice.pcm,
     reference: Annotated[
         Path | None,
         typer.Option(
@@ -145,7 +157,11 @@ def slam(
     keyframe_distance: Annotated[float, _positive("Keyframe every this many metres (> 0).")] = 0.5,
     keyframe_angle: Annotated[float, _positive("…or this many degrees (> 0).")] = 20.0,
     loop_radius: Annotated[
-        float, _positive("Loop candidates within this many metres of the estimate (> 0).")
+        float,
+        _positive(
+            "Loop candidates within this many metres of the estimate where the graph is sure "
+            "(> 0); the window grows with its uncertainty."
+        ),
     ] = 3.0,
     loop_min_gap: Annotated[
         int, typer.Option(help="Loop candidates at least this many keyframes back.", min=1)
@@ -194,7 +210,12 @@ def slam(
     from vgm_studio.datasets.relations import looks_like_relations, match_relations, read_relations
     from vgm_studio.graph.config import GraphConfig
     from vgm_studio.maps.config import MapConfig
-    from vgm_studio.slam.config import FrontEndConfig, SlamConfig, ValidationConfig
+    from vgm_studio.slam.config import (
+        ConsistencyConfig,
+        FrontEndConfig,
+        SlamConfig,
+        ValidationConfig,
+    )
     from vgm_studio.slam.scoring import relations_from_reference, with_own_reference
     from vgm_studio.tools.cmd import _writable_file, _writable_folder
     from vgm_studio.tools.sources import report_skipped
@@ -267,6 +288,7 @@ def slam(
             model=model,
             loop_threshold=loop_threshold or None,
         ),
+        consistency=ConsistencyConfig(enabled=consistency is ConsistencyChoice.pcm),
         graph=GraphConfig(robust=robust.value),
         maps=MapConfig(resolution=resolution),
     )
@@ -287,7 +309,15 @@ def _run(
 
     from vgm_studio.maps.png import write_maps
     from vgm_studio.slam.pipeline import run_slam
-    from vgm_studio.slam.report import edge_line, errors_of, run_maps, summary, table
+    from vgm_studio.slam.report import (
+        LOOP_COLOURS,
+        edge_line,
+        errors_of,
+        loop_segments,
+        run_maps,
+        summary,
+        table,
+    )
 
     result = run_slam(scan_log, config)
     typer.echo(edge_line(result))
@@ -300,7 +330,7 @@ def _run(
         maps = run_maps(scan_log, result, config.maps)
         result.seconds["maps"] = time.perf_counter() - t
     if map_png is not None and maps is not None:
-        for path in write_maps(map_png, maps):
+        for path in write_maps(map_png, maps, ("after", loop_segments(result), LOOP_COLOURS)):
             typer.echo(f"wrote {path}")
     if record is not None or spawn:
         from vgm_studio.recording import write_recording

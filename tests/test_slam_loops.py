@@ -1,0 +1,167 @@
+"""The loop search's parts with real numbers: relations from reference poses, the graph's
+relative uncertainty, the window search and the group-consistency check."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from vgm_studio.core import se2
+from vgm_studio.graph.metrics import RelationSampling, reference_relations, relation_errors
+from vgm_studio.graph.pose_graph import GraphEdge
+from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
+from vgm_studio.slam.consistency import Loop, consistent
+from vgm_studio.slam.loop_search import window_candidates
+from vgm_studio.slam.uncertainty import UncertaintyGraph
+
+STEP_COV = np.diag([0.005**2, 0.005**2, math.radians(0.03) ** 2])
+LOOP_COV = np.diag([0.02**2, 0.02**2, math.radians(0.5) ** 2])
+
+
+def out_and_back(length: float = 100.0, step: float = 0.5) -> np.ndarray:
+    """Down a straight corridor and back along the other side, 1 m to the left."""
+    n = int(length / step)
+    out = np.column_stack([np.arange(n) * step, np.zeros(n), np.zeros(n)])
+    back = np.column_stack([out[::-1, 0], np.ones(n), np.full(n, math.pi)])
+    return np.vstack([out, back])
+
+
+def racetrack(length: float = 100.0, width: float = 2.0, step: float = 0.5) -> np.ndarray:
+    """Once round a long thin rectangle, then a few metres of the first side again."""
+    legs = [((0, 0), (length, 0)), ((length, 0), (length, width)), ((length, width), (0, width))]
+    legs += [((0, width), (0, 0)), ((0, 0), (3.0, 0))]
+    out = []
+    for (x0, y0), (x1, y1) in legs:
+        n = max(1, round(math.dist((x0, y0), (x1, y1)) / step))
+        heading = math.atan2(y1 - y0, x1 - x0)
+        for t in np.arange(n) / n:
+            out.append((x0 + t * (x1 - x0), y0 + t * (y1 - y0), heading))
+    return np.array(out)
+
+
+def chain(poses: np.ndarray, cov: np.ndarray = STEP_COV) -> UncertaintyGraph:
+    graph = UncertaintyGraph()
+    for i in range(1, len(poses)):
+        graph.add(GraphEdge(i - 1, i, se2.between(poses[i - 1], poses[i]), cov, True))
+    return graph
+
+
+def test_reference_relations_join_neighbours_and_revisits_and_score_the_reference_as_exact():
+    truth = out_and_back(20.0, 0.1)
+    reference: list[np.ndarray | None] = list(truth)
+    reference[5] = None  # a scan without a reference pose takes part in no relation
+    relations = reference_relations(reference, RelationSampling(seed=3))
+    pairs = [(r.a, r.b) for r in relations]
+    again = reference_relations(reference, RelationSampling(seed=3))
+    assert pairs == [(r.a, r.b) for r in again]
+    assert pairs != [(r.a, r.b) for r in reference_relations(reference, RelationSampling(seed=4))]
+    assert all(5 not in p and a < b for p in pairs for a, b in [p])
+    gaps = [math.dist(truth[r.a, :2], truth[r.b, :2]) for r in relations]
+    sequential = sum(g < 0.65 for g in gaps)
+    # Places half a metre apart along 40 m: about 80 sequential pairs, as many revisits
+    # (the way back passes 1 m from the way out), none farther than 3 m apart.
+    assert 70 <= sequential <= 85 and len(relations) >= 2 * sequential - 2
+    assert max(gaps) <= 3.0 and sum(abs(r.b - r.a) > 100 for r in relations) > 30
+    assert relation_errors(truth, relations).trans_mean < 1e-12
+    bent = truth.copy()
+    bent[200:] = se2.compose(
+        se2.compose(truth[199], [0, 0, 0.05]), se2.between(truth[199], truth[200:])
+    )
+    assert relation_errors(bent, relations).trans_mean > 0.01
+    assert reference_relations([None, truth[0]]) == []
+
+
+def test_relative_uncertainty_grows_along_a_chain_and_a_loop_shrinks_it():
+    poses = out_and_back()
+    graph = chain(poses)
+    last = len(poses) - 1
+    (rel,) = graph.relative([last], len(poses))
+    assert rel.position_var[last] == 0.0
+    # Monotone along the chain back to the start, metres of σ after 200 m.
+    assert np.all(np.diff(rel.position_var[::-1]) >= 0)
+    assert 0.5 < math.sqrt(rel.position_var[0]) < 5.0
+    graph.add(GraphEdge(0, last, se2.between(poses[0], poses[last]), LOOP_COV))
+    (closed,) = graph.relative([last], len(poses))
+    assert closed.position_var[0] < 0.01 * rel.position_var[0]
+    assert closed.heading_var[0] < rel.heading_var[0]
+
+
+def test_window_search_widens_after_a_long_corridor_and_gates_by_mahalanobis():
+    poses = racetrack()
+    graph = chain(poses)
+    config = FrontEndConfig()
+    count = len(poses)
+    # 200 m round, the estimate has drifted 2 m along the first side: the window must be
+    # metres wide to match the start again.
+    drifted = poses.copy()
+    drifted[:, 0] += np.linspace(0, 2.0, count)
+    block = range(count - 5, count)
+    found = window_candidates(block, drifted, graph, config)
+    assert found and all(c.source == "window" for c in found)
+    assert {c.a for c in found} <= set(range(0, 12))
+    assert all(c.linear == config.window_linear[1] for c in found)
+    # A scan matcher's heading drift over 200 m is about a degree: the narrowest turn.
+    assert all(
+        c.angular == pytest.approx(math.radians(config.window_angular_deg[0])) for c in found
+    )
+    per_keyframe = np.bincount([c.b for c in found])
+    assert per_keyframe.max() <= config.loops_per_keyframe
+    # Once the ends are tied, the same keyframes get the smallest window, and a place 6 m
+    # off to the side in the estimate is no longer a candidate.
+    graph.add(GraphEdge(0, count - 1, se2.between(poses[0], poses[-1]), LOOP_COV))
+    tight = window_candidates(block, poses, graph, config)
+    assert tight and all(c.linear == config.window_linear[0] for c in tight)
+    far = poses.copy()
+    far[count - 5 :, 1] += 6.0
+    assert window_candidates(block, far, graph, config) == []
+    assert window_candidates(range(1, 5), poses, graph, config) == []
+
+
+def ring(count: int = 120, radius: float = 10.0) -> np.ndarray:
+    angle = np.linspace(0, 2 * math.pi, count, endpoint=False)
+    return np.column_stack(
+        [radius * np.cos(angle), radius * np.sin(angle), se2.wrap_angle(angle + math.pi / 2)]
+    )
+
+
+def test_consistency_keeps_agreeing_loops_and_rejects_aliased_ones():
+    truth = ring()
+    rng = np.random.default_rng(4)
+    graph = chain(truth)
+    # The estimate has drifted (rigidly, after keyframe 60): the check must not rely on it.
+    estimate = truth.copy()
+    estimate[60:] = se2.compose([0.3, -0.2, 0.01], truth[60:])
+    loops = []
+    for a in range(0, 30, 3):
+        b = a + 90
+        z = se2.between(truth[a], truth[b]) + rng.normal(0, [0.01, 0.01, 0.002])
+        loops.append(Loop(a, b, z, LOOP_COV))
+    aliased = []
+    for a in (4, 11, 19):
+        b = a + 90
+        # One door along: a perfect-looking match two metres off.
+        z = se2.compose(se2.between(truth[a], truth[b]), [2.0, 0.0, 0.0])
+        aliased.append(Loop(a, b, z, LOOP_COV))
+    flags = consistent(loops + aliased, estimate, graph, ConsistencyConfig())
+    assert flags[: len(loops)].all()
+    assert not flags[len(loops) :].any()
+    # Alone, a loop far from a confident estimate is rejected; no loops, no decisions.
+    sure = chain(truth, STEP_COV * 1e-4)
+    assert not consistent([aliased[0]], truth, sure)[0]
+    assert consistent([loops[0]], truth, sure)[0]
+    assert consistent([], truth, sure).shape == (0,)
+
+
+@pytest.mark.parametrize("weight", [1, 3])
+def test_a_group_of_agreeing_loops_outvotes_a_drifted_estimate(weight):
+    truth = ring()
+    graph = chain(truth, STEP_COV * 1e-4)  # the graph (wrongly) believes its odometry
+    estimate = truth.copy()
+    estimate[60:, :2] += 1.5
+    loops = [
+        Loop(a, a + 90, se2.between(truth[a], truth[a + 90]), LOOP_COV) for a in range(0, 30, 2)
+    ]
+    flags = consistent(loops, estimate, graph, ConsistencyConfig(estimate_weight=weight))
+    assert flags.all()
