@@ -129,7 +129,7 @@ def ring(count: int = 120, radius: float = 10.0) -> np.ndarray:
 def test_consistency_keeps_agreeing_loops_and_rejects_aliased_ones():
     truth = ring()
     rng = np.random.default_rng(4)
-    graph = chain(truth)
+    graph = chain(truth, LOOP_COV)  # the graph's own floors, as the front end checks with
     # The estimate has drifted (rigidly, after keyframe 60): the check must not rely on it.
     estimate = truth.copy()
     estimate[60:] = se2.compose([0.3, -0.2, 0.01], truth[60:])

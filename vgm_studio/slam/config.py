@@ -30,7 +30,10 @@ class FrontEndConfig:
         window_linear: (min, max) half-width of a loop's search window in x and y, metres:
             three σ of the relative position, clamped.
         window_angular_deg: (min, max) half-width in heading, degrees.
-        place_candidates: Place-recognition candidates per keyframe (0: none).
+        place_candidates: Place-recognition candidates per keyframe that the window search
+            found none for (0: none).
+        place_max_distance: …whose Scan Context column-shift distance is at most this
+            (0 same, 1 nothing in common).
         place_angular_deg: Half-width in heading of a place candidate's window around the
             descriptor's yaw guess, degrees.
         drift_sigma_xy: How far a kept sequential edge may be off, as the loop search sees it,
@@ -68,6 +71,7 @@ class FrontEndConfig:
     window_linear: tuple[float, float] = (0.3, 3.0)
     window_angular_deg: tuple[float, float] = (10.0, 30.0)
     place_candidates: int = 1
+    place_max_distance: float = 0.35
     place_angular_deg: float = 15.0
     drift_sigma_xy: float = 0.005
     drift_sigma_theta_deg: float = 0.03
@@ -113,12 +117,15 @@ class ConsistencyConfig:
     Attributes:
         enabled: Run the check (off: every loop the validator kept goes in).
         probability: The χ²(3) gate of a cycle is its quantile at this probability.
-        estimate_weight: The running estimate counts as this many loops in the vote.
+        estimate_weight: The running estimate counts as this many loops in the vote. Its
+            covariance is the graph's own (wide) one, so by default it vetoes what the graph
+            is sure of: a group of aliased loops (a corridor matched one door along, a
+            symmetric hall matched to its mirror) agrees with itself and would outvote it.
     """
 
     enabled: bool = True
     probability: float = 0.99
-    estimate_weight: int = 3
+    estimate_weight: int = 1000
 
 
 @dataclass(frozen=True)

@@ -24,12 +24,13 @@ from vgm_studio.datasets.scans import Scan
 from vgm_studio.graph.config import GraphConfig
 from vgm_studio.graph.pose_graph import GraphEdge, RunningEstimate, edge_covariance
 from vgm_studio.matching.correlative import CorrelativeConfig, LoopMatcher, SearchWindow
+from vgm_studio.matching.descriptor import PlaceIndex
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.matching.submap import Submap
 from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
 from vgm_studio.slam.consistency import Loop, consistent
 from vgm_studio.slam.edges import SlamEdge, SlamEdgeKind
-from vgm_studio.slam.loop_search import Candidate, window_candidates
+from vgm_studio.slam.loop_search import Candidate, place_candidates, window_candidates
 from vgm_studio.slam.uncertainty import UncertaintyGraph
 
 Validate = Callable[[Sequence[SlamEdge]], None]
@@ -103,7 +104,11 @@ class FrontEnd:
         self.config = config
         self.graph = graph
         self.consistency = consistency or ConsistencyConfig()
+        # Windows from a scan matcher's drift; the consistency check from the graph's own
+        # (wider) covariances, so that it vetoes only what the graph is sure of.
         self._uncertainty = UncertaintyGraph()
+        self._graph_uncertainty = UncertaintyGraph()
+        self._places = PlaceIndex()
         self.loop_matcher = LoopMatcher(CorrelativeConfig(min_score=config.loop_min_score))
         self._submaps: dict[tuple[int, int, int], Submap] = {}
         self.estimate = RunningEstimate(odometry[0], graph)
@@ -154,6 +159,7 @@ class FrontEnd:
             self.estimate.add_keyframe(se2.compose(self.estimate.poses[e.a], factor.measurement))
             self.estimate.add_edge(factor)
             self._uncertainty.add(self._drift(e) if e.kept else factor)
+            self._graph_uncertainty.add(factor)
         self.edges.extend(edges)
         self.estimate.update()
 
@@ -162,6 +168,11 @@ class FrontEnd:
         self._submaps.clear()
         poses = self.estimate.poses
         candidates = window_candidates(block, poses, self._uncertainty, self.config)
+        # Place recognition where the window search has nothing to offer: a revisit the
+        # estimate has lost track of (and it spares the matcher many wide searches).
+        searched = {c.b for c in candidates}
+        lost = [b for b in block if b not in searched]
+        candidates += place_candidates(lost, self._places, self.scans, self.config)
         candidates += self._injected(block)
         edges = [self._match_loop(c) for c in candidates]
         self.validate(edges)
@@ -173,6 +184,8 @@ class FrontEnd:
         for e in kept:
             self._add(graph_edge(e, self.graph))
         self.edges.extend(edges)
+        for b in block:
+            self._places.add(b, self.scans[b].points())
         if kept:
             self.estimate.update(extra_iterations=2)
 
@@ -187,19 +200,23 @@ class FrontEnd:
         return out
 
     def _match_loop(self, c: Candidate) -> SlamEdge:
-        """Matches b against a submap of the keyframes around a, over the candidate's window."""
+        """Matches b against a submap of the keyframes around a, over the candidate's window.
+
+        A window candidate is first matched in the smallest window around the estimate; the
+        full window's pose replaces it only if it scores clearly higher.
+        """
         submap = self._submap(c.a, c.b)
         target, scan = self.scans[c.a], self.scans[c.b]
         cfg = self.config
+        wide = SearchWindow(c.linear, c.angular)
         small = SearchWindow(cfg.window_linear[0], math.radians(cfg.window_angular_deg[0]))
-        result = self.loop_matcher.match(submap, target, scan, c.guess, small)
-        if c.linear > small.linear or c.angular > small.angular:
-            wide = self.loop_matcher.match(
-                submap, target, scan, c.guess, SearchWindow(c.linear, c.angular)
-            )
-            near = result.score or 0.0
-            if (wide.score or 0.0) > (1.0 + cfg.prefer_estimate) * near:
-                result = wide
+        if c.source != "window" or (c.linear <= small.linear and c.angular <= small.angular):
+            result = self.loop_matcher.match(submap, target, scan, c.guess, wide)
+        else:
+            result = self.loop_matcher.match(submap, target, scan, c.guess, small)
+            far = self.loop_matcher.match(submap, target, scan, c.guess, wide)
+            if (far.score or 0.0) > (1.0 + cfg.prefer_estimate) * (result.score or 0.0):
+                result = far
         return SlamEdge("loop", c.a, c.b, c.guess, result, c.source == "injected", source=c.source)
 
     def _submap(self, a: int, b: int) -> Submap:
@@ -216,7 +233,7 @@ class FrontEnd:
         if not self.consistency.enabled or not loops:
             return
         checked = [Loop(e.a, e.b, e.estimate, graph_edge(e, self.graph).covariance) for e in loops]
-        flags = consistent(checked, poses, self._uncertainty, self.consistency)
+        flags = consistent(checked, poses, self._graph_uncertainty, self.consistency)
         for e, ok in zip(loops, flags, strict=True):
             e.consistency = "kept" if ok else "rejected"
             e.kept = bool(ok)
@@ -225,7 +242,9 @@ class FrontEnd:
         """A kept sequential edge as the loop search sees it: the matcher's covariance plus a
         scan matcher's drift, not the graph's wider floors."""
         cov = edge.match.covariance
-        base = np.zeros((3, 3)) if cov is None else np.asarray(cov, dtype=np.float64)
+        if cov is None or not np.all(np.isfinite(cov)):
+            return graph_edge(edge, self.graph)
+        base = np.asarray(cov, dtype=np.float64)
         floor = [self.config.drift_sigma_xy**2] * 2 + [
             math.radians(self.config.drift_sigma_theta_deg) ** 2
         ]
@@ -234,3 +253,4 @@ class FrontEnd:
     def _add(self, factor: GraphEdge) -> None:
         self.estimate.add_edge(factor)
         self._uncertainty.add(factor)
+        self._graph_uncertainty.add(factor)

@@ -9,14 +9,16 @@ the graph is sure the search is the old fixed radius, and 200 m of unclosed corr
 spans metres. The nearest candidates by that distance are matched over a search window of
 three σ, clamped.
 
-Place: the keyframe's scan descriptor against those of all earlier keyframes (a KD-tree of
-rotation-invariant keys; see ``matching.descriptor``); the estimate is not consulted, so a
+Place: the keyframe's scan descriptor (a Scan Context for 2D lasers, Kim and Kim 2018) against
+those of all earlier keyframes (a KD-tree of rotation-invariant ring keys, re-ranked by the
+column-shift distance; see ``matching.descriptor``); the estimate is not consulted, so a
 revisit is proposed even tens of metres off. Its window is centred on the descriptor's yaw.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,6 +26,8 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from vgm_studio.core import se2
+from vgm_studio.datasets.scans import Scan
+from vgm_studio.matching.descriptor import PlaceIndex
 from vgm_studio.slam.config import FrontEndConfig
 from vgm_studio.slam.edges import EdgeSource
 from vgm_studio.slam.uncertainty import Relative, UncertaintyGraph
@@ -95,3 +99,32 @@ def _window_of(
         )
         for a in chosen
     ]
+
+
+def place_candidates(
+    keyframes: Sequence[int], index: PlaceIndex, scans: Sequence[Scan], config: FrontEndConfig
+) -> list[Candidate]:
+    """Earlier keyframes whose scan looks like that of each of ``keyframes``, whatever the
+    estimate.
+
+    The guess is "b stands where a stood, turned by the descriptor's yaw"; the window is the
+    widest in x and y and ``place_angular_deg`` around that yaw. Pairs turned further than
+    ``loop_max_angle_deg`` are left out.
+    """
+    if config.place_candidates == 0:
+        return []
+    out = []
+    angular = math.radians(config.place_angular_deg)
+    # Not the estimate but the sensor: a scanner that faced the other way saw other walls,
+    # and a corridor seen from its two ends looks alike (the descriptor's yaw is then ~180°).
+    max_turn = math.radians(config.loop_max_angle_deg)
+    for b in keyframes:
+        newest = b - config.loop_min_gap
+        if newest < 0:
+            continue
+        for m in index.query(scans[b].points(), k=config.place_candidates, max_key=newest):
+            if m.distance > config.place_max_distance or abs(m.yaw) > max_turn:
+                continue
+            guess = np.array([0.0, 0.0, m.yaw])
+            out.append(Candidate(m.key, b, "place", guess, config.window_linear[1], angular))
+    return out

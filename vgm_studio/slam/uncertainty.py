@@ -53,7 +53,9 @@ class UncertaintyGraph:
 
     def add(self, edge: GraphEdge) -> None:
         """Adds a kept edge (sequential, odometry or loop)."""
-        cov = edge.covariance
+        cov = np.asarray(edge.covariance, dtype=np.float64)
+        if not np.all(np.isfinite(cov)):
+            raise ValueError(f"edge {edge.a}→{edge.b} has a covariance that is not finite")
         self._a.append(edge.a)
         self._b.append(edge.b)
         self._vt.append(float(cov[0, 0] + cov[1, 1]) / 2.0)
@@ -63,6 +65,8 @@ class UncertaintyGraph:
 
     def relative(self, sources: NDArray[np.int64] | list[int], count: int) -> list[Relative]:
         """Uncertainty of keyframes ``0..count-1`` relative to each source."""
+        if len(sources) == 0:
+            return []
         n = max(count, self._count)
         a0, b0 = np.array(self._a, dtype=np.int64), np.array(self._b, dtype=np.int64)
         vt0, vr0 = np.array(self._vt), np.array(self._vr)
