@@ -15,6 +15,9 @@ vgmnet validator and ``--robust none``:
 
 Run: python benchmarks/bench_slam.py [--logs intel,office-1,...] [--list]
 
+Wall seconds depend on what else the machine runs; CPU seconds (the child's user + system
+time) much less so.
+
 Targets (issue 11): Intel after ≤ 0.025 m and ≤ 60 s; each corrected log after ≤ 0.10 m; no
 injected false loop kept. Anchors (Intel): Kümmerle et al.'s graph mapping 0.031 m,
 Cartographer 0.0229 m (Hess et al. 2016), Graph FLIRT 0.02 m.
@@ -24,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import subprocess
 import sys
 import time
@@ -86,16 +90,20 @@ def arguments(name: str) -> list[str | Path]:
 
 def run(name: str) -> dict:
     start = time.perf_counter()
+    cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
     proc = subprocess.run(
         [sys.executable, "-m", "vgm_studio.tools.cmd", "slam", *map(str, arguments(name))],
         capture_output=True,
         text=True,
     )
     wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu_s = after.ru_utime + after.ru_stime - cpu.ru_utime - cpu.ru_stime
     if proc.returncode:
         return {"error": proc.stderr.strip().splitlines()[-1] if proc.stderr else "failed"}
     doc = json.loads((OUT / f"{name}.json").read_text())
     doc["wall"] = wall
+    doc["cpu"] = cpu_s
     return doc
 
 
@@ -110,7 +118,7 @@ def _err(d: dict | None) -> str:
 
 def row(name: str, d: dict) -> list[str]:
     if "error" in d:
-        return [name, d["error"][:60], *[""] * 7]
+        return [name, d["error"][:60], *[""] * 8]
     by = d["loops_by_source"]
     false = (
         f"{d['injected_false_loops_kept']}/{d['injected_false_loops']}" if by["injected"] else ""
@@ -125,6 +133,7 @@ def row(name: str, d: dict) -> list[str]:
         str(d["loops_kept"]),
         false,
         f"{d['wall']:.0f}",
+        f"{d['cpu']:.0f}",
     ]
 
 
@@ -172,7 +181,7 @@ def main() -> None:
         d = run(name)
         results[name] = d
         rows.append(row(name, d))
-        print(f"{name}: {rows[-1][1]} ({rows[-1][-1]} s)", file=sys.stderr, flush=True)
+        print(f"{name}: {' | '.join(rows[-1][1:])}", file=sys.stderr, flush=True)
     print("# vgm-studio slam, --validator vgmnet (bundled), --robust none; whole runs on 2 cores")
     print(f"# {machine()}")
     header = [
@@ -185,6 +194,7 @@ def main() -> None:
         "kept after consistency",
         "false kept",
         "wall s",
+        "CPU s",
     ]
     print(table(header, rows))
     for line in verdicts(results):
