@@ -12,6 +12,7 @@ survivors closed into the graph before the next block.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 
@@ -148,9 +149,12 @@ class FrontEnd:
 
     def _sequential(self, block: range) -> None:
         odo = self.odometry
-        edges = [
-            self._match("sequential", k - 1, k, se2.between(odo[k - 1], odo[k])) for k in block
-        ]
+        if self.config.sequential_submap > 0:
+            edges = self._sequential_on_submaps(block)
+        else:
+            edges = [
+                self._match("sequential", k - 1, k, se2.between(odo[k - 1], odo[k])) for k in block
+            ]
         self.validate(edges)
         for e in edges:
             factor = (
@@ -162,6 +166,32 @@ class FrontEnd:
             self._graph_uncertainty.add(factor)
         self.edges.extend(edges)
         self.estimate.update()
+
+    def _sequential_on_submaps(self, block: range) -> list[SlamEdge]:
+        """Each keyframe matched against a submap of the last ones, in the frame of the one
+        before it, from the odometry's step within the smallest loop window."""
+        cfg = self.config
+        window = SearchWindow(cfg.window_linear[0], math.radians(cfg.window_angular_deg[0]))
+        # The block's keyframes are not in the estimate yet: chain their matches.
+        poses = {
+            k: self.estimate.poses[k]
+            for k in range(max(0, block.start - cfg.sequential_submap), block.start)
+        }
+        edges = []
+        for k in block:
+            members = range(max(0, k - cfg.sequential_submap), k)
+            local = se2.between(poses[k - 1], np.array([poses[j] for j in members]))
+            submap = Submap.from_scans([self.scans[j] for j in members], local)
+            guess = se2.between(self.odometry[k - 1], self.odometry[k])
+            result = self.loop_matcher.match(
+                submap, self.scans[k - 1], self.scans[k], guess, window
+            )
+            if result.covariance is None:
+                # Nothing scored (a scan that sees little): the pairwise matcher's answer.
+                result = self.matcher.match(self.scans[k - 1], self.scans[k], guess)
+            edges.append(SlamEdge("sequential", k - 1, k, guess, result))
+            poses[k] = se2.compose(poses[k - 1], edges[-1].estimate)
+        return edges
 
     def _loops(self, block: range) -> None:
         # Submaps are placed by the estimate, which moves when loops close: built per block.
@@ -214,9 +244,19 @@ class FrontEnd:
             result = self.loop_matcher.match(submap, target, scan, c.guess, wide)
         else:
             result = self.loop_matcher.match(submap, target, scan, c.guess, small)
-            far = self.loop_matcher.match(submap, target, scan, c.guess, wide)
-            if (far.score or 0.0) > (1.0 + cfg.prefer_estimate) * (result.score or 0.0):
-                result = far
+            bar = (1.0 + cfg.prefer_estimate) * (result.score or 0.0)
+            # Scores are at most 1: past that bar the wide window cannot win, and below it
+            # branch and bound may drop every pose that would not (same answer, less work).
+            if bar < 1.0:
+                matcher = self.loop_matcher
+                base = matcher.config
+                matcher.config = dataclasses.replace(base, min_score=max(base.min_score, bar))
+                try:
+                    far = matcher.match(submap, target, scan, c.guess, wide)
+                finally:
+                    matcher.config = base
+                if (far.score or 0.0) > bar:
+                    result = far
         return SlamEdge("loop", c.a, c.b, c.guess, result, c.source == "injected", source=c.source)
 
     def _submap(self, a: int, b: int) -> Submap:
