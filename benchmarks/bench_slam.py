@@ -104,6 +104,7 @@ def run(name: str) -> dict:
     doc = json.loads((OUT / f"{name}.json").read_text())
     doc["wall"] = wall
     doc["cpu"] = cpu_s
+    (OUT / f"{name}.json").write_text(json.dumps(doc, indent=2) + "\n")
     return doc
 
 
@@ -166,6 +167,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--logs", help="Comma-separated rows to run (see --list); default all.")
     parser.add_argument("--list", action="store_true", help="List the row names and stop.")
+    parser.add_argument(
+        "--from-json",
+        action="store_true",
+        help="Print the table from the rows' JSON in build/slam (runs made earlier, e.g. in "
+        "parallel) instead of running them.",
+    )
     args = parser.parse_args()
     if args.list:
         print("\n".join(rows_known()))
@@ -178,7 +185,13 @@ def main() -> None:
     OUT.mkdir(parents=True, exist_ok=True)
     results, rows = {}, []
     for name in names:
-        d = run(name)
+        if args.from_json:
+            path = OUT / f"{name}.json"
+            if not path.exists():
+                continue
+            d = json.loads(path.read_text())
+        else:
+            d = run(name)
         results[name] = d
         rows.append(row(name, d))
         print(f"{name}: {' | '.join(rows[-1][1:])}", file=sys.stderr, flush=True)

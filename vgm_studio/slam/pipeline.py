@@ -32,7 +32,7 @@ class SlamResult:
         odometry: (N, 3) kiss-icp odometry of every scan.
         edges: Every matched edge, in the order the front end made them.
         running: (K, 3) the front end's last running estimate.
-        before: The graph with every edge, optimised.
+        before: The graph with every measured edge, optimised.
         after: The graph with the validated edges, optimised.
         threshold: The model's p(success) threshold (NaN for ``none`` and ``reference``).
         seconds: Wall time per stage.
@@ -137,7 +137,9 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
     running = front.estimate.poses
     t = time.perf_counter()
     odo_kf = odometry[keyframes]
-    before = optimize(running, [graph_edge(e, config.graph) for e in edges], config.graph)
+    # Every edge the matcher measured; a loop it could not place (no pose scored) has none.
+    measured = [e for e in edges if e.kind == "sequential" or e.match.covariance is not None]
+    before = optimize(running, [graph_edge(e, config.graph) for e in measured], config.graph)
     after_edges: list[GraphEdge] = []
     for e in edges:
         if e.kept:
