@@ -53,7 +53,9 @@ class FrontEndConfig:
             branch and bound over a 6 m window visits every pose).
         sequential_submap: Sequential edges are matched against a submap of this many last
             keyframes (correlative search in the smallest loop window, then refinement);
-            0 matches scan to scan (kiss-icp from odometry, then refinement).
+            0 matches scan to scan (kiss-icp from odometry, then refinement). The submap
+            measured better: Intel 0.0290 m against 0.0301 m, simulated office 0.0165 m
+            against 0.0186 m, for ~8% more time.
         submap_keyframes: A loop is matched against a submap of its target keyframe and this
             many keyframes on each side of it.
         loop_min_gap: …and at least this many keyframes earlier.
@@ -82,7 +84,7 @@ class FrontEndConfig:
     drift_sigma_theta_deg: float = 0.03
     prefer_estimate: float = 0.1
     loop_min_score: float = 0.3
-    sequential_submap: int = 0
+    sequential_submap: int = 5
     submap_keyframes: int = 5
     loop_min_gap: int = 20
     loops_per_keyframe: int = 2
