@@ -362,7 +362,7 @@ def test_two_scan_topics_need_a_choice(tmp_path: Path, kind: str) -> None:
         read_rosbag(path)
     message = str(err.value)
     assert message.startswith(f"{path}: ")
-    assert "/scan_front" in message and "/scan_rear" in message and "scan_topic" in message
+    assert "/scan_front" in message and "/scan_rear" in message and "--scan-topic" in message
 
     rear = read_rosbag(path, ReadOptions(scan_topic="/scan_rear"))
     assert len(rear) == 7
@@ -383,12 +383,12 @@ def test_two_odometry_topics_need_a_choice(tmp_path: Path) -> None:
         "rosbag1",
         lambda ts: scan_messages(ts) + odom_messages(ts) + odom_messages(ts, "/odom_b", offset=10),
     )
-    with pytest.raises(InputError, match=r"/odom, /odom_b.*odom_topic"):
+    with pytest.raises(InputError, match=r"/odom, /odom_b.*--odom-topic"):
         read_rosbag(path)
     log = read_rosbag(path, ReadOptions(odom_topic="/odom_b"))
     for k, scan in enumerate(log.scans):
         assert_pose_close(scan.odometry, true_pose((scan_stamp_ns(k) - T0_NS) / NS, offset=10))
-    with pytest.raises(InputError, match="odom_topic /scan carries sensor_msgs/msg/LaserScan"):
+    with pytest.raises(InputError, match="--odom-topic /scan carries sensor_msgs/msg/LaserScan"):
         read_rosbag(path, ReadOptions(odom_topic="/scan"))
 
 

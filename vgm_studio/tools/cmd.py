@@ -18,7 +18,7 @@ import typer
 from vgm_studio.datasets import ReadOptions, open_log
 from vgm_studio.errors import InputError
 from vgm_studio.tools import model_cmds, slam_cmd, studio_cmds, trainer_cmds
-from vgm_studio.tools.sources import report_skipped
+from vgm_studio.tools.sources import report_skipped, warn_if_disagreeing
 
 app = typer.Typer(
     name="vgm-studio",
@@ -134,6 +134,31 @@ ScanTopicOpt = Annotated[str | None, typer.Option(help="ROS bags: LaserScan topi
 OdomTopicOpt = Annotated[str | None, typer.Option(help="ROS bags: Odometry topic.")]
 
 
+def _laser_pose(value: str | None) -> tuple[float, float, float] | None:
+    from vgm_studio.datasets.mount import parse_laser_pose
+
+    if value is None:
+        return None
+    try:
+        return parse_laser_pose(value)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc)) from None
+
+
+LaserPoseOpt = Annotated[
+    str | None,
+    typer.Option(
+        metavar="X,Y,YAW",
+        help="The laser in the robot's base frame: metres ahead, metres left, degrees.",
+        show_default="from the bag's /tf_static or /tf, else at the base",
+        callback=_laser_pose,
+    ),
+]
+LaserFlippedOpt = Annotated[
+    bool, typer.Option(help="The laser is mounted upside down (its scans are mirrored).")
+]
+
+
 def _read_options(
     poses: Poses,
     fov: float,
@@ -142,6 +167,8 @@ def _read_options(
     skip_bad_lines: bool,
     scan_topic: str | None = None,
     odom_topic: str | None = None,
+    laser_pose: Any = None,
+    laser_flipped: bool = False,
 ) -> ReadOptions:
     return ReadOptions(
         poses=poses.value,
@@ -151,6 +178,8 @@ def _read_options(
         skip_bad_lines=skip_bad_lines,
         scan_topic=scan_topic,
         odom_topic=odom_topic,
+        laser_pose=laser_pose,
+        laser_flipped=laser_flipped,
     )
 
 
@@ -170,7 +199,16 @@ def info(
     skip_bad_lines: SkipOpt = False,
     scan_topic: ScanTopicOpt = None,
     odom_topic: OdomTopicOpt = None,
+    laser_pose: LaserPoseOpt = None,
+    laser_flipped: LaserFlippedOpt = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+    check: Annotated[
+        bool,
+        typer.Option(
+            "--check",
+            help="Only check that scan matches agree with odometry (the laser's mount).",
+        ),
+    ] = False,
 ) -> None:
     """Print what a log holds: scans, beams, field of view, duration, poses, distance."""
     from vgm_studio.datasets.relations import looks_like_relations, read_relations
@@ -193,9 +231,23 @@ def info(
                 f"between {len(stamps)} scan timestamps"
             )
         return
-    scan_log = open_log(
-        log, _read_options(poses, fov, max_range, laser, skip_bad_lines, scan_topic, odom_topic)
+    options = _read_options(
+        poses,
+        fov,
+        max_range,
+        laser,
+        skip_bad_lines,
+        scan_topic,
+        odom_topic,
+        laser_pose,
+        laser_flipped,
     )
+    scan_log = open_log(log, options)
+    if check:
+        from vgm_studio.tools.info import check_mount
+
+        check_mount(scan_log, as_json)
+        return
     summary = summarize(scan_log)
     typer.echo(json.dumps(summary, indent=2) if as_json else format_summary(summary))
     report_skipped(scan_log)
@@ -339,6 +391,8 @@ def candidates(
     skip_bad_lines: SkipOpt = False,
     scan_topic: ScanTopicOpt = None,
     odom_topic: OdomTopicOpt = None,
+    laser_pose: LaserPoseOpt = None,
+    laser_flipped: LaserFlippedOpt = False,
 ) -> None:
     """Match candidate edges of a log and label them against a reference; write JSONL."""
     from vgm_studio.matching.candidates import CandidateConfig, make_candidates
@@ -358,7 +412,17 @@ def candidates(
             f"--success-theta {success_theta:g} must be below --failure-theta {failure_theta:g}."
         )
     _writable_file(out)
-    options = _read_options(poses, fov, max_range, laser, skip_bad_lines, scan_topic, odom_topic)
+    options = _read_options(
+        poses,
+        fov,
+        max_range,
+        laser,
+        skip_bad_lines,
+        scan_topic,
+        odom_topic,
+        laser_pose,
+        laser_flipped,
+    )
     source = read_source(
         log,
         options,
@@ -391,6 +455,7 @@ def candidates(
     except OSError as exc:
         raise InputError(out, f"cannot write ({exc.strerror or exc})") from None
     _print_edge_summary(edges, seconds, out)
+    warn_if_disagreeing(source.log, edges)
 
 
 def _print_edge_summary(edges: list[Any], seconds: float, out: Path) -> None:

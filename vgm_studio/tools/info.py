@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import json
 import math
 from collections import Counter
 from typing import Any
 
 import numpy as np
+import typer
 
 from vgm_studio.datasets.scans import ScanLog
+from vgm_studio.matching.agreement import MIN_EDGES, check_log
+from vgm_studio.tools.sources import mount_line
 
 
 def summarize(log: ScanLog) -> dict[str, Any]:
@@ -33,10 +37,13 @@ def summarize(log: ScanLog) -> dict[str, Any]:
         "duration_s": duration,
         "duration_note": duration_note,
         "odometry": log.has_odometry,
+        "odometry_scans": sum(s.odometry is not None for s in log.scans),
         "reference": log.has_reference,
         "reference_origin": log.reference_origin,
         "pose_fields": log.pose_source,
-        "travelled_m": log.travelled_distance(),
+        "travelled_m": log.travelled_distance() if log.has_odometry or log.has_reference else None,
+        "mount": None if log.mount is None else log.mount.to_json(),
+        "mount_line": mount_line(log),
         "skipped_lines": log.skipped_lines,
         "ignored_messages": log.ignored_messages,
     }
@@ -91,14 +98,48 @@ def format_summary(s: dict[str, Any]) -> str:
         ("max range", ", ".join(f"{r:g} m" for r in s["max_range"])),
         ("points per scan", f"{s['mean_points_per_scan']:.0f} (mean)"),
         ("duration", dur),
-        ("odometry", "yes" if s["odometry"] else "no"),
+        ("odometry", _odometry_text(s)),
         ("reference poses", f"yes ({s['reference_origin']})" if s["reference"] else "no"),
         ("scan pose fields", pose_note),
-        ("travelled", f"{s['travelled_m']:.1f} m"),
     ]
+    if s["travelled_m"] is not None:
+        rows.append(("travelled", f"{s['travelled_m']:.1f} m"))
+    rows.append(("laser mount", s["mount_line"]))
     if s["ignored_messages"]:
         rows.append(("ignored", ", ".join(f"{k} ×{v}" for k, v in s["ignored_messages"].items())))
     if s["skipped_lines"]:
         rows.append(("skipped bad lines", str(s["skipped_lines"])))
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+
+def _odometry_text(s: dict[str, Any]) -> str:
+    if s["odometry"]:
+        return "yes"
+    if s.get("odometry_scans"):
+        return f"on {s['odometry_scans']:,} of {s['scans']:,} scans only"
+    return "none"
+
+
+def check_mount(log: ScanLog, as_json: bool) -> None:
+    """``info --check``: matches consecutive keyframes and says whether they agree with odometry."""
+    agreement = check_log(log)
+    mount = mount_line(log)
+    if as_json:
+        doc: dict[str, Any] = {"path": str(log.path), "mount": mount}
+        doc["agreement"] = None if agreement is None else agreement.to_json()
+        typer.echo(json.dumps(doc, indent=2))
+    elif agreement is None or agreement.edges < MIN_EDGES:
+        if not any(s.odometry is not None for s in log.scans):
+            reason = "the log has no odometry"
+        elif agreement is None:
+            reason = "the robot does not move"
+        else:
+            reason = f"only {agreement.edges} matched step(s); {MIN_EDGES} are needed"
+        typer.echo(f"{log.path}: nothing to check ({reason}); laser mount {mount}")
+    elif agreement.disagrees:
+        typer.echo(agreement.warning(mount))
+    else:
+        typer.echo(
+            f"{log.path}: scans and odometry agree ({agreement.figures()}); laser mount {mount}"
+        )

@@ -61,6 +61,12 @@ def _checked(
     return check
 
 
+def _laser_pose(value: str | None) -> Any:
+    from vgm_studio.tools.cmd import _laser_pose as parse
+
+    return parse(value)
+
+
 def _positive(what: str) -> Any:
     return typer.Option(help=what, callback=_checked(0, lo_open=True))
 
@@ -186,6 +192,18 @@ def slam(
     ] = False,
     scan_topic: Annotated[str | None, typer.Option(help="ROS bags: LaserScan topic.")] = None,
     odom_topic: Annotated[str | None, typer.Option(help="ROS bags: Odometry topic.")] = None,
+    laser_pose: Annotated[
+        str | None,
+        typer.Option(
+            metavar="X,Y,YAW",
+            help="The laser in the robot's base frame: metres ahead, metres left, degrees.",
+            show_default="from the bag's /tf_static or /tf, else at the base",
+            callback=_laser_pose,
+        ),
+    ] = None,
+    laser_flipped: Annotated[
+        bool, typer.Option(help="The laser is mounted upside down (its scans are mirrored).")
+    ] = False,
 ) -> None:
     """Graph SLAM with validated edges: odometry, loops, gtsam, maps, metrics, a recording."""
     from vgm_studio.datasets import ReadOptions, open_log
@@ -221,6 +239,8 @@ def slam(
         skip_bad_lines=skip_bad_lines,
         scan_topic=scan_topic,
         odom_topic=odom_topic,
+        laser_pose=laser_pose,  # type: ignore[arg-type]  # parsed by _laser_pose
+        laser_flipped=laser_flipped,
     )
     scan_log = open_log(log, options)
     report_skipped(scan_log)
@@ -283,6 +303,8 @@ def _run(
 
     result = run_slam(scan_log, config)
     typer.echo(edge_line(result))
+    _say_what_is_missing(scan_log, result)
+    _check_agreement(scan_log, result)
     errors = errors_of(result, matched) if matched is not None else None
     if errors is not None:
         typer.echo(table(errors))
@@ -312,3 +334,30 @@ def _run(
             raise InputError(json_out, f"cannot write ({exc.strerror or exc})") from None
         typer.echo(f"wrote {json_out}")
     typer.echo(f"done in {seconds:.1f} s")
+
+
+def _check_agreement(scan_log: Any, result: Any) -> None:
+    """Warns when the sequential matches disagree with the log's wheel odometry."""
+    from vgm_studio.matching.agreement import check_agreement, motions_of
+    from vgm_studio.tools.sources import report_agreement
+
+    seq = [e for e in result.edges if e.kind == "sequential"]
+    keys = result.keyframes
+    motions = motions_of(
+        [(int(keys[e.a]), int(keys[e.b])) for e in seq],
+        [e.estimate for e in seq],
+        [e.match.covariance for e in seq],
+    )
+    report_agreement(scan_log, check_agreement(scan_log, motions))
+
+
+def _say_what_is_missing(scan_log: Any, result: Any) -> None:
+    """A short or still log runs to the end; these lines say why its outputs are thin."""
+    if not any(s.odometry is not None for s in scan_log.scans):
+        typer.echo(f"{scan_log.path}: no odometry in this log; kiss-icp alone gives the motion")
+    if len(result.keyframes) < 2:
+        typer.echo(
+            f"{scan_log.path}: one keyframe (the robot never moved a keyframe's distance or "
+            "angle): no edges and no loops; the maps and recording hold that one scan",
+            err=True,
+        )

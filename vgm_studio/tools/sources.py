@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -11,6 +12,8 @@ import typer
 from vgm_studio.datasets import ReadOptions, ScanLog, open_log
 from vgm_studio.datasets.relations import MatchedRelation
 from vgm_studio.errors import InputError
+from vgm_studio.matching.agreement import Agreement, check_agreement, motions_of
+from vgm_studio.matching.edges import Edge
 
 
 @dataclass
@@ -89,3 +92,32 @@ def read_source(
             err=True,
         )
     return CandidateSource(scan_log, matched, params)
+
+
+def mount_line(log: ScanLog) -> str:
+    """The mount a log's scans are placed by, and where it came from, for people to read."""
+    source = log.mount_source or "no tf in this log and no --laser-pose"
+    if log.mount is None:
+        return f"at the base ({source})"
+    return f"{log.mount.describe()} ({source})"
+
+
+def report_agreement(log: ScanLog, agreement: Agreement | None) -> None:
+    """Prints the one warning when the scans and the odometry disagree."""
+    if agreement is not None and agreement.disagrees:
+        typer.echo(agreement.warning(mount_line(log)), err=True)
+
+
+def warn_if_disagreeing(log: ScanLog, edges: Sequence[Edge]) -> Agreement | None:
+    """Checks the sequential edges against the log's odometry; warns when they disagree."""
+    seq = [e for e in edges if e.kind == "sequential"]
+    agreement = check_agreement(
+        log,
+        motions_of(
+            [(e.a, e.b) for e in seq],
+            [e.estimate for e in seq],
+            [e.match.get("covariance") for e in seq],
+        ),
+    )
+    report_agreement(log, agreement)
+    return agreement

@@ -7,7 +7,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Literal, cast
+from typing import Annotated, Any, Literal, cast
 
 import typer
 
@@ -58,6 +58,9 @@ def fill_workspace(
         raise InputError(source, "no such file or folder")
     sha = _source_hash(source)
     key = f"{sha}:{reference.resolve() if reference else ''}"
+    if options.laser_pose is not None or options.laser_flipped:
+        # Another mount places the scans elsewhere: other edges, not the ones already there.
+        key += f":{options.laser_pose}:{options.laser_flipped}"
     if store.has_source(key):
         return 0
     if source.suffix.lower() == ".jsonl":
@@ -204,6 +207,12 @@ AnnotatorOpt = Annotated[
 ]
 
 
+def _laser_pose(value: str | None) -> Any:
+    from vgm_studio.tools.cmd import _laser_pose as parse  # cmd imports this module
+
+    return parse(value)
+
+
 def label(
     source: Annotated[
         Path,
@@ -235,6 +244,18 @@ def label(
     ] = 0.0,
     poses: Annotated[str, typer.Option(help="auto, odometry or reference.")] = "auto",
     skip_bad_lines: Annotated[bool, typer.Option(help="Skip malformed log lines.")] = False,
+    laser_pose: Annotated[
+        str | None,
+        typer.Option(
+            metavar="X,Y,YAW",
+            help="The laser in the robot's base frame: metres ahead, metres left, degrees.",
+            show_default="from the bag's /tf_static or /tf, else at the base",
+            callback=_laser_pose,
+        ),
+    ] = None,
+    laser_flipped: Annotated[
+        bool, typer.Option(help="The laser is mounted upside down (its scans are mirrored).")
+    ] = False,
 ) -> None:
     """Serve a log's candidate edges (or an edges file) in the browser for labeling."""
     start = time.perf_counter()
@@ -242,7 +263,12 @@ def label(
         raise typer.BadParameter(f"{poses!r} is not one of auto, odometry, reference.")
     check_port_free(host, port)
     store = LabelStore(workspace or Path(f"{source.stem}.studio"))
-    options = ReadOptions(poses=cast(PoseSource, poses), skip_bad_lines=skip_bad_lines)
+    options = ReadOptions(
+        poses=cast(PoseSource, poses),
+        skip_bad_lines=skip_bad_lines,
+        laser_pose=laser_pose,  # type: ignore[arg-type]  # parsed by _laser_pose
+        laser_flipped=laser_flipped,
+    )
     fill_workspace(store, source, reference, options, max_loops, time_offset)
     model_path = _model_path(model, no_model)
     trainer = _trainer_options(no_trainer, retrain_every, base)
