@@ -14,8 +14,14 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
-from rosbags.interfaces import QosTime
+from rosbags.interfaces import (
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -135,11 +141,11 @@ def _scan(ts: Typestore, stamp_ns: int, run: SimBag, k: int) -> Any:
     )
 
 
-def _tf_static(ts: Typestore, mount: tuple[float, float, float, bool]) -> Any:
+def _tf(ts: Typestore, mount: tuple[float, float, float, bool], stamp_ns: int = T0_NS) -> Any:
     t = ts.types
     x, y, yaw, flipped = mount
     transform = t["geometry_msgs/msg/TransformStamped"](
-        header=_header(ts, T0_NS, "base_link"),
+        header=_header(ts, stamp_ns, "base_link"),
         child_frame_id="laser",
         transform=t["geometry_msgs/msg/Transform"](
             translation=t["geometry_msgs/msg/Vector3"](x=x, y=y, z=0.2),
@@ -165,15 +171,22 @@ TRANSIENT_LOCAL = Qos(
 
 
 def messages(
-    ts: Typestore, run: SimBag, mount: tuple[float, float, float, bool] | None, odometry: bool
+    ts: Typestore,
+    run: SimBag,
+    mount: tuple[float, float, float, bool] | None,
+    odometry: bool,
+    static: bool = True,
 ) -> list[tuple[str, int, Any]]:
-    """(topic, receive time, message): /tf_static first, then scans and odometry."""
+    """(topic, receive time, message): /tf_static first (or /tf with every scan), then scans
+    and odometry."""
     out: list[tuple[str, int, Any]] = []
-    if mount is not None:
-        out.append(("/tf_static", T0_NS, _tf_static(ts, mount)))
+    if mount is not None and static:
+        out.append(("/tf_static", T0_NS, _tf(ts, mount)))
     for k in range(len(run.truth)):
         stamp = T0_NS + NS // 10 + round(k * run.scan_period * NS)
         out.append(("/scan", stamp + 1000, _scan(ts, stamp, run, k)))
+        if mount is not None and not static:
+            out.append(("/tf", stamp + 500, _tf(ts, mount, stamp - 3_000_000)))
         if odometry:
             out.append(("/odom", stamp + 2000, _odometry(ts, stamp, run.truth[k])))
     return out
@@ -186,17 +199,18 @@ def write_sim_bag(
     tf_mount: tuple[float, float, float, bool] | None,
     ros2: bool = False,
     odometry: bool = True,
+    static: bool = True,
 ) -> Path:
     """Writes ``run`` as a ROS 1 ``.bag`` (``path``) or a ROS 2 sqlite3 folder; returns it.
 
     ``tf_mount`` puts the laser's mount in /tf_static (transient-local in ROS 2, as
-    ``static_transform_publisher`` offers it).
+    ``static_transform_publisher`` offers it), or with ``static=False`` in /tf at every scan.
     """
     ts = get_typestore(Stores.ROS2_HUMBLE if ros2 else Stores.ROS1_NOETIC)
     if not ros2:
         # rosbags' Noetic store lacks tf2_msgs; a ROS 1 bag carries each type's definition.
         ts.register(get_types_from_msg(TF_MESSAGE, "tf2_msgs/msg/TFMessage"))
-    msgs = sorted(messages(ts, run, tf_mount, odometry), key=lambda m: m[1])
+    msgs = sorted(messages(ts, run, tf_mount, odometry, static), key=lambda m: m[1])
     if not ros2:
         with Writer1(path) as w1:
             conns: dict[str, Any] = {}

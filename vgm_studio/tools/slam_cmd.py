@@ -354,7 +354,9 @@ def _check_agreement(scan_log: Any, result: Any) -> None:
 def _say_what_is_missing(scan_log: Any, result: Any) -> None:
     """A short or still log runs to the end; these lines say why its outputs are thin."""
     if not any(s.odometry is not None for s in scan_log.scans):
-        typer.echo(f"{scan_log.path}: no odometry in this log; kiss-icp alone gives the motion")
+        typer.echo(
+            f"{scan_log.path}: no odometry in this log; kiss-icp alone gives the motion", err=True
+        )
     if len(result.keyframes) < 2:
         typer.echo(
             f"{scan_log.path}: one keyframe (the robot never moved a keyframe's distance or "
