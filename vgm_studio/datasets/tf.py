@@ -8,6 +8,7 @@ without a leading ``/`` (ROS 1 bags often write ``/base_link``).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -28,9 +29,20 @@ def frame(name: str) -> str:
     return name.lstrip("/")
 
 
-def _matrix(translation: Any, rotation: Any) -> NDArray[np.float64]:
-    """4×4 transform of a geometry_msgs Transform (a unit quaternion, normalised first)."""
-    q = np.array([rotation.x, rotation.y, rotation.z, rotation.w], dtype=np.float64)
+Transform = tuple[float, float, float, float, float, float, float]  # x y z, qx qy qz qw
+
+
+def _values(translation: Any, rotation: Any) -> Transform:
+    v = translation
+    q = rotation
+    return (
+        float(v.x), float(v.y), float(v.z), float(q.x), float(q.y), float(q.z), float(q.w)
+    )  # fmt: skip
+
+
+def _matrix(t: Transform) -> NDArray[np.float64]:
+    """4×4 transform of a translation and a quaternion (normalised first)."""
+    q = np.array(t[3:], dtype=np.float64)
     norm = float(np.linalg.norm(q))
     x, y, z, w = q / norm if norm > 0 else (0.0, 0.0, 0.0, 1.0)
     m = np.eye(4)
@@ -39,24 +51,39 @@ def _matrix(translation: Any, rotation: Any) -> NDArray[np.float64]:
         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
     ]
-    m[:3, 3] = [translation.x, translation.y, translation.z]
+    m[:3, 3] = t[:3]
     return m
 
 
 @dataclass
 class _Link:
+    """One frame's transforms to its parent over time.
+
+    A value is kept only when it changes, so a fixed joint that ``robot_state_publisher``
+    sends on /tf at 50 Hz costs one entry; a lookup takes the last value at or before the
+    time asked (the first before any).
+    """
+
     parent: str
     stamps: list[int] = field(default_factory=list)
-    matrices: list[NDArray[np.float64]] = field(default_factory=list)
+    values: list[Transform] = field(default_factory=list)
+    _ordered: bool = True
+
+    def add(self, stamp_ns: int, value: Transform) -> None:
+        if self.values and self.values[-1] == value:
+            return
+        self._ordered = self._ordered and (not self.stamps or stamp_ns >= self.stamps[-1])
+        self.stamps.append(stamp_ns)
+        self.values.append(value)
 
     def at(self, stamp_ns: int) -> NDArray[np.float64]:
-        if len(self.stamps) == 1:
-            return self.matrices[0]
-        i = int(np.searchsorted(self.stamps, stamp_ns))
-        i = min(max(i, 0), len(self.stamps) - 1)
-        if i > 0 and abs(self.stamps[i - 1] - stamp_ns) <= abs(self.stamps[i] - stamp_ns):
-            i -= 1
-        return self.matrices[i]
+        if not self._ordered:
+            order = sorted(range(len(self.stamps)), key=self.stamps.__getitem__)
+            self.stamps = [self.stamps[i] for i in order]
+            self.values = [self.values[i] for i in order]
+            self._ordered = True
+        i = int(np.searchsorted(self.stamps, stamp_ns, side="right")) - 1
+        return _matrix(self.values[max(i, 0)])
 
 
 @dataclass
@@ -70,18 +97,15 @@ class TfTree:
         """Adds a TFMessage's transforms (a static one replaces what its child had)."""
         for t in msg.transforms:
             child, parent = frame(t.child_frame_id), frame(t.header.frame_id)
-            if not child or not parent or child == parent:
-                continue
-            m = _matrix(t.transform.translation, t.transform.rotation)
-            if not np.all(np.isfinite(m)):
+            value = _values(t.transform.translation, t.transform.rotation)
+            if not child or not parent or child == parent or not all(map(math.isfinite, value)):
                 continue
             if static:
-                self.static[child] = _Link(parent, [0], [m])
+                self.static[child] = _Link(parent, [0], [value])
                 continue
             link = self.dynamic.setdefault(child, _Link(parent))
             ns = int(t.header.stamp.sec) * 1_000_000_000 + int(t.header.stamp.nanosec) or stamp_ns
-            link.stamps.append(ns)
-            link.matrices.append(m)
+            link.add(ns, value)
 
     def __bool__(self) -> bool:
         return bool(self.static or self.dynamic)
