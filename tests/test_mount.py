@@ -235,3 +235,24 @@ def test_carmen_options_keep_the_world_where_the_log_put_it(tmp_path: Path) -> N
             a.reference,
             atol=1e-9,  # type: ignore[union-attr]
         )
+
+
+def test_edges_of_a_log_at_the_base_keep_their_ids(tmp_path: Path) -> None:
+    from vgm_studio.simulation import SimConfig, simulate
+
+    path = simulate(SimConfig(preset="corridor", laps=0.03, num_beams=91), tmp_path)
+    log = open_log(path)
+    edges = make_candidates(log, ScanMatcher(), CandidateConfig(loops=False), progress=False)
+    assert edges and all(e.params["mount"] is None for e in edges)
+    for e in edges:  # the id formula from before mounts existed
+        assert e.edge_id == edge_id(log.content_hash, e.a, e.b, e.estimate)
+
+
+def test_unreadable_bag_is_one_line_on_the_command_line(tmp_path: Path) -> None:
+    path = tmp_path / "old.bag"
+    path.write_bytes(b"#ROSRECORD V1.2\n" + bytes(4096))
+    proc = cli("info", path)
+    assert proc.returncode == 1
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr
+    assert "older than 2.0" in lines[0] and "rosbag fix" in lines[0]
