@@ -176,6 +176,8 @@ def mount_from_tf(
         stamps_ns: The scans' times.
     """
     laser_frame = frame(laser_frame)
+    if not laser_frame:
+        return TfMount(None, "the scans name no frame (empty header.frame_id)")
     if base_frame is None:
         base_frame = next((f for f in BASE_FRAMES if tree.has_frame(f)), None)
         if base_frame is None:
