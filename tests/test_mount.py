@@ -256,3 +256,21 @@ def test_unreadable_bag_is_one_line_on_the_command_line(tmp_path: Path) -> None:
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr
     assert "older than 2.0" in lines[0] and "rosbag fix" in lines[0]
+
+
+def test_a_reference_log_takes_the_same_mount(tmp_path: Path) -> None:
+    """A CARMEN reference's poses are the laser's too: joined to a mounted log, they move to
+    the base with the same mount, so labels compare poses of one frame."""
+    from vgm_studio.simulation import SimConfig, simulate
+    from vgm_studio.tools.sources import read_source
+
+    path = simulate(SimConfig(preset="corridor", laps=0.03, num_beams=91), tmp_path)
+    options = ReadOptions(poses="odometry", laser_pose=(0.3, 0.1, 30.0))
+    plain = read_source(path, ReadOptions(poses="odometry"), reference=path).log
+    mounted = read_source(path, options, reference=path).log
+    assert mounted.mount is not None
+    for a, b in zip(plain.scans, mounted.scans, strict=True):
+        assert a.reference is not None and b.reference is not None
+        np.testing.assert_allclose(
+            se2.compose(b.reference, mounted.mount.pose), a.reference, atol=1e-9
+        )

@@ -213,7 +213,7 @@ def slam(
     from vgm_studio.maps.config import MapConfig
     from vgm_studio.slam.config import FrontEndConfig, SlamConfig, ValidationConfig
     from vgm_studio.tools.cmd import _writable_file, _writable_folder
-    from vgm_studio.tools.sources import report_skipped
+    from vgm_studio.tools.sources import mount_options, report_skipped
 
     start = time.perf_counter()
     if log.is_file() and looks_like_relations(log):
@@ -263,7 +263,8 @@ def slam(
                 "relations give no pose per scan; --reference takes a corrected log or a "
                 "log with TRUEPOS (relations go to --relations)",
             )
-        scan_log = with_reference(scan_log, open_log(reference), time_tolerance, time_offset)
+        ref_log = open_log(reference, mount_options(options))
+        scan_log = with_reference(scan_log, ref_log, time_tolerance, time_offset)
     config = SlamConfig(
         front_end=FrontEndConfig(
             keyframe_distance=keyframe_distance,

@@ -77,7 +77,8 @@ def read_source(
                 )
         else:
             params["time_offset"] = time_offset
-            scan_log = with_reference(scan_log, open_log(reference), time_tolerance, time_offset)
+            ref_log = open_log(reference, mount_options(options))
+            scan_log = with_reference(scan_log, ref_log, time_tolerance, time_offset)
             joined = sum(s.reference is not None for s in scan_log.scans)
             if joined < len(scan_log):
                 typer.echo(
@@ -92,6 +93,12 @@ def read_source(
             err=True,
         )
     return CandidateSource(scan_log, matched, params)
+
+
+def mount_options(options: ReadOptions) -> ReadOptions:
+    """Options for reading a reference log: the log's mount, so that both logs' poses are of
+    the base (a CARMEN reference's poses are the laser's, like the log's)."""
+    return ReadOptions(laser_pose=options.laser_pose, laser_flipped=options.laser_flipped)
 
 
 def mount_line(log: ScanLog) -> str:
