@@ -39,7 +39,8 @@ T0_NS = 1_700_000_000 * NS
 class SimBag:
     """A simulated run: what to write and the truth to compare with."""
 
-    truth: NDArray[np.float64]  # (N, 3) base poses; odometry is exact
+    truth: NDArray[np.float64]  # (N, 3) true base poses
+    odometry: NDArray[np.float64]  # (N, 3) the wheels' base poses
     ranges: NDArray[np.float32]  # (N, beams) in the laser's frame
     angle_min: float
     angle_increment: float
@@ -52,25 +53,31 @@ def simulate_run(
     scans: int = 160,
     still: bool = False,
     preset: str = "office",
+    noisy_odometry: bool = False,
 ) -> SimBag:
     """The first ``scans`` poses of a preset's route (two corner turns in ``office``), ranges
     cast from a laser at ``mount`` = (x, y, yaw, upside down) on the base. ``still`` keeps the
-    robot at its first pose."""
-    config = SimConfig(
-        preset=preset,
-        scan_spacing=0.2,
-        num_beams=361,
-        fov_deg=270.0,
-        max_range=20.0,
-        odom_trans_noise=0.0,
-        odom_rot_noise_deg=0.0,
-        odom_turn_noise=0.0,
-        odom_drift_deg=0.0,
+    robot at its first pose. Odometry is exact, or with ``noisy_odometry`` the simulator's
+    default wheel noise and drift (``SimBag.odometry``)."""
+    exact = (
+        {}
+        if noisy_odometry
+        else {
+            "odom_trans_noise": 0.0,
+            "odom_rot_noise_deg": 0.0,
+            "odom_turn_noise": 0.0,
+            "odom_drift_deg": 0.0,
+        }
     )
+    config = SimConfig(
+        preset=preset, scan_spacing=0.2, num_beams=361, fov_deg=270.0, max_range=20.0, **exact
+    )  # type: ignore[arg-type]
     p = plan(config)
     truth = p.truth.poses[:scans].copy()
+    odometry = p.odometry[:scans].copy()
     if still:
         truth[:] = truth[0]
+        odometry[:] = odometry[0]
     x, y, yaw, flipped = mount
     laser = se2.compose(truth, np.array([x, y, yaw]))
     beams = p.beam_angles()
@@ -85,6 +92,7 @@ def simulate_run(
     angle_min = float(beams[0])
     return SimBag(
         truth=truth,
+        odometry=odometry,
         ranges=np.array(rows),
         angle_min=angle_min,
         angle_increment=float(beams[1] - beams[0]),
@@ -188,7 +196,7 @@ def messages(
         if mount is not None and not static:
             out.append(("/tf", stamp + 500, _tf(ts, mount, stamp - 3_000_000)))
         if odometry:
-            out.append(("/odom", stamp + 2000, _odometry(ts, stamp, run.truth[k])))
+            out.append(("/odom", stamp + 2000, _odometry(ts, stamp, run.odometry[k])))
     return out
 
 

@@ -274,3 +274,27 @@ def test_a_reference_log_takes_the_same_mount(tmp_path: Path) -> None:
         np.testing.assert_allclose(
             se2.compose(b.reference, mounted.mount.pose), a.reference, atol=1e-9
         )
+
+
+def test_a_laser_facing_backwards_disagrees_in_translation(tmp_path: Path) -> None:
+    """Turned half round and not declared, the scans see the robot drive backwards."""
+    backwards = (0.0, 0.0, math.pi, False)
+    path = write_sim_bag(tmp_path / "run.bag", simulate_run(backwards), tf_mount=None)
+    agreement = check_log(open_log(path))
+    assert agreement is not None and agreement.translation_disagrees
+    assert agreement.median_disagreement > 0.3  # two 0.25 m keyframe steps' worth, nearly
+    given = open_log(path, ReadOptions(laser_pose=(0.0, 0.0, 180.0)))
+    fixed = check_log(given)
+    assert fixed is not None and not fixed.disagrees
+
+
+def test_ordinary_wheel_noise_raises_no_warning(tmp_path: Path) -> None:
+    """The simulator's default wheel noise and drift (2%/√m, 0.5°/√m, 0.05°/m) is within
+    the check's allowance: a correctly mounted laser gives no warning."""
+    run = simulate_run(MOUNT, noisy_odometry=True)
+    assert np.abs(run.odometry - run.truth).max() > 0.01  # the wheels do drift
+    log = open_log(write_sim_bag(tmp_path / "run.bag", run, tf_mount=MOUNT))
+    edges, _ = sequential_errors(log, run.truth)
+    assert not check_agreement(log, _motions(edges)).disagrees  # type: ignore[union-attr]
+    checked = check_log(log)
+    assert checked is not None and not checked.disagrees
