@@ -20,11 +20,15 @@ from vgm_studio.core import se2
 from vgm_studio.datasets import ReadOptions, open_log
 from vgm_studio.datasets.mount import LaserMount, mount_from_matrix, parse_laser_pose
 from vgm_studio.datasets.scans import ScanLog
-from vgm_studio.matching.agreement import check_agreement, check_log
+from vgm_studio.matching.agreement import (
+    check_agreement,
+    check_log,
+    disagreement_warning,
+    edges_agreement,
+)
 from vgm_studio.matching.candidates import CandidateConfig, make_candidates
 from vgm_studio.matching.edges import Edge, edge_id
 from vgm_studio.matching.matcher import ScanMatcher
-from vgm_studio.tools.sources import warn_if_disagreeing
 
 MOUNT = (0.3, 0.0, 0.0, True)  # 0.3 m ahead, facing forward, upside down
 OPTIONS = ReadOptions(laser_pose=(0.3, 0.0, 0.0), laser_flipped=True)
@@ -93,24 +97,23 @@ def test_ros2_tf_static_is_transient_local(tmp_path: Path, run_sim: SimBag) -> N
 
 
 def test_without_tf_the_warning_names_the_options_and_the_options_fix_it(
-    tmp_path: Path, run_sim: SimBag, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path, run_sim: SimBag
 ) -> None:
     path = write_sim_bag(tmp_path / "run.bag", run_sim, tf_mount=None)
     plain = open_log(path)
     assert plain.mount is None and plain.mount_source == "the bag has no /tf or /tf_static"
     edges, _ = sequential_errors(plain, run_sim.truth)
-    agreement = warn_if_disagreeing(plain, edges)
+    agreement = edges_agreement(plain, edges)
     assert agreement is not None and agreement.heading_disagrees
-    warning = capsys.readouterr().err
-    assert warning.count("\n") == 1 and warning.startswith("warning: ")
+    warning = disagreement_warning(plain, agreement)
+    assert warning is not None and "\n" not in warning and warning.startswith("warning: ")
     assert "--laser-pose" in warning and "--laser-flipped" in warning
     assert "--odom-topic" in warning and "wheel slip" in warning
 
     given = open_log(path, OPTIONS)
     assert given.mount == LaserMount(0.3, 0.0, 0.0, True)
     edges = assert_agrees_to_a_centimetre(given, run_sim.truth)
-    assert not warn_if_disagreeing(given, edges).disagrees  # type: ignore[union-attr]
-    assert capsys.readouterr().err == ""
+    assert disagreement_warning(given, edges_agreement(given, edges)) is None
 
 
 def test_info_check_and_candidates_print_the_warning(tmp_path: Path, run_sim: SimBag) -> None:
@@ -261,8 +264,8 @@ def test_unreadable_bag_is_one_line_on_the_command_line(tmp_path: Path) -> None:
 def test_a_reference_log_takes_the_same_mount(tmp_path: Path) -> None:
     """A CARMEN reference's poses are the laser's too: joined to a mounted log, they move to
     the base with the same mount, so labels compare poses of one frame."""
+    from vgm_studio.datasets.source import read_source
     from vgm_studio.simulation import SimConfig, simulate
-    from vgm_studio.tools.sources import read_source
 
     path = simulate(SimConfig(preset="corridor", laps=0.03, num_beams=91), tmp_path)
     options = ReadOptions(poses="odometry", laser_pose=(0.3, 0.1, 30.0))

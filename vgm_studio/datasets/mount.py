@@ -159,3 +159,11 @@ def with_mount(
         for s in log.scans
     ]
     return dataclasses.replace(log, scans=scans, mount=mount, mount_source=source)
+
+
+def mount_line(log: ScanLog) -> str:
+    """The mount a log's scans are placed by, and where it came from, for people to read."""
+    source = log.mount_source or "no tf in this log and no --laser-pose"
+    if log.mount is None:
+        return f"at the base ({source})"
+    return f"{log.mount.describe()} ({source})"

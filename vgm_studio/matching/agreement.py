@@ -27,8 +27,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vgm_studio.core import se2
+from vgm_studio.datasets.mount import mount_line
 from vgm_studio.datasets.scans import ScanLog
 from vgm_studio.matching.candidates import select_keyframes
+from vgm_studio.matching.edges import Edge
 from vgm_studio.matching.matcher import ScanMatcher
 
 # Wheel odometry of a working robot is good to a few per cent of the distance and angle
@@ -164,6 +166,26 @@ def motions_of(
         Motion(a, b, np.asarray(e, dtype=np.float64), None if c is None else np.asarray(c))
         for (a, b), e, c in zip(pairs, estimates, covariances, strict=True)
     ]
+
+
+def edges_agreement(log: ScanLog, edges: Sequence[Edge]) -> Agreement | None:
+    """The check on a log's sequential candidate edges."""
+    seq = [e for e in edges if e.kind == "sequential"]
+    return check_agreement(
+        log,
+        motions_of(
+            [(e.a, e.b) for e in seq],
+            [e.estimate for e in seq],
+            [e.match.get("covariance") for e in seq],
+        ),
+    )
+
+
+def disagreement_warning(log: ScanLog, agreement: Agreement | None) -> str | None:
+    """The one warning line when the scans and the odometry disagree, else None."""
+    if agreement is None or not agreement.disagrees:
+        return None
+    return agreement.warning(mount_line(log))
 
 
 def check_log(

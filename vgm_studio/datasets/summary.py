@@ -2,17 +2,14 @@
 
 from __future__ import annotations
 
-import json
 import math
 from collections import Counter
 from typing import Any
 
 import numpy as np
-import typer
 
+from vgm_studio.datasets.mount import mount_line
 from vgm_studio.datasets.scans import ScanLog
-from vgm_studio.matching.agreement import MIN_EDGES, check_log
-from vgm_studio.tools.sources import mount_line
 
 
 def summarize(log: ScanLog) -> dict[str, Any]:
@@ -119,27 +116,3 @@ def _odometry_text(s: dict[str, Any]) -> str:
     if s.get("odometry_scans"):
         return f"on {s['odometry_scans']:,} of {s['scans']:,} scans only"
     return "none"
-
-
-def check_mount(log: ScanLog, as_json: bool) -> None:
-    """``info --check``: matches consecutive keyframes and says whether they agree with odometry."""
-    agreement = check_log(log)
-    mount = mount_line(log)
-    if as_json:
-        doc: dict[str, Any] = {"path": str(log.path), "mount": mount}
-        doc["agreement"] = None if agreement is None else agreement.to_json()
-        typer.echo(json.dumps(doc, indent=2))
-    elif agreement is None or agreement.edges < MIN_EDGES:
-        if not any(s.odometry is not None for s in log.scans):
-            reason = "the log has no odometry"
-        elif agreement is None:
-            reason = "the robot does not move"
-        else:
-            reason = f"only {agreement.edges} matched step(s); {MIN_EDGES} are needed"
-        typer.echo(f"{log.path}: nothing to check ({reason}); laser mount {mount}")
-    elif agreement.disagrees:
-        typer.echo(agreement.warning(mount))
-    else:
-        typer.echo(
-            f"{log.path}: scans and odometry agree ({agreement.figures()}); laser mount {mount}"
-        )
