@@ -167,3 +167,14 @@ def test_no_points_or_no_pose_above_min_score_returns_the_guess(office):
     strict = LoopMatcher(CorrelativeConfig(min_score=0.99))
     got = strict.match(sub, office.scans[100], office.scans[700], guess, window)
     assert not got.converged and got.score is None
+
+
+def test_pairwise_figures_have_no_score_key(office):
+    fig = ScanMatcher().match(office.scans[10], office.scans[12], np.zeros(3)).figures()
+    assert "score" not in fig and "inlier_ratio" in fig
+
+
+@pytest.mark.parametrize("linear, angular", [(-1.0, 0.1), (1.0, -0.1), (1.0, 4.0)])
+def test_a_window_must_be_a_window(linear, angular):
+    with pytest.raises(ValueError, match="search window"):
+        SearchWindow(linear, angular)

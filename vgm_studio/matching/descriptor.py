@@ -85,7 +85,7 @@ def describe(points: NDArray[np.float64], config: DescriptorConfig | None = None
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     r = np.hypot(pts[:, 0], pts[:, 1])
     keep = (r < cfg.max_range) & (r > 0)
-    ring = (r[keep] / cfg.max_range * cfg.rings).astype(np.intp)
+    ring = np.minimum((r[keep] / cfg.max_range * cfg.rings).astype(np.intp), cfg.rings - 1)
     bearing = np.mod(np.arctan2(pts[keep, 1], pts[keep, 0]), 2 * math.pi)
     sector = np.minimum((bearing / (2 * math.pi) * cfg.sectors).astype(np.intp), cfg.sectors - 1)
     hit = np.zeros((cfg.rings, cfg.sectors), dtype=np.float64)

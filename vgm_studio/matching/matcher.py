@@ -59,6 +59,9 @@ class MatchResult:
             if d[key] is not None:
                 d[key] = np.asarray(d[key]).tolist()
         d["residual"] = None if not np.isfinite(self.residual) else self.residual
+        if self.score is None:
+            # Pairwise edges keep the figures they always had.
+            d.pop("score")
         return d
 
 

@@ -89,6 +89,9 @@ class Submap:
             depth: Highest level to precompute; branch and bound over windows wider than
                 2^depth cells starts from several top blocks.
             normal_neighbors: Neighbours used to fit local lines for the refinement.
+
+        Raises:
+            ValueError: No points, a resolution ≤ 0 or a negative depth.
         """
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         if len(pts) == 0:
@@ -128,6 +131,9 @@ class Submap:
             resolution: Cell edge, metres.
             max_range: Readings farther than this are left out.
             **kw: Passed on to ``from_points`` (sigma, depth, normal_neighbors).
+
+        Raises:
+            ValueError: Scans and poses differ in number, or no scan has a point in range.
         """
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
         if len(poses) != len(scans):
