@@ -3,11 +3,12 @@ robot may be, each matched, validated, checked for consistency and handed to the
 estimate.
 
 Keyframes are taken a block at a time. For each block the sequential edges are matched from
-odometry (against a submap of the last keyframes) and validated together (the validator is fastest on batches), the running estimate
-is updated, then every keyframe of the block proposes loop candidates (``loop_search``: a
-window that grows with the graph's uncertainty, and place recognition), those are matched,
-validated, the ones the validator kept are checked as a group (``consistency``), and the
-survivors closed into the graph before the next block.
+odometry (against a submap of the last keyframes) and validated together (the validator is
+fastest on batches), the running estimate is updated, then every keyframe of the block
+proposes loop candidates (``loop_search``: a window that grows with the graph's uncertainty,
+and place recognition), those are matched, validated, the ones the validator kept are
+checked as a group (``consistency``), and the survivors closed into the graph before the
+next block.
 """
 
 from __future__ import annotations
