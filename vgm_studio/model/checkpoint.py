@@ -19,6 +19,7 @@ import torch
 
 from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.errors import InputError
+from vgm_studio.model.operating import PrecisionCurve
 from vgm_studio.model.registry import MODEL_NAMES
 from vgm_studio.vgm.grid import VGMParams
 
@@ -45,6 +46,8 @@ class Checkpoint:
         history: One record per epoch.
         device: Where it was trained.
         created: When (UTC, ISO 8601).
+        curve: Validation precision and recall at every cut, for choosing a cut by
+            precision; None in checkpoints written before it was kept.
     """
 
     model: str
@@ -58,10 +61,12 @@ class Checkpoint:
     history: list[dict[str, Any]] = field(default_factory=list)
     device: str = "cpu"
     created: str = field(default_factory=_now)
+    curve: PrecisionCurve | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The on-disk layout."""
         out: dict[str, Any] = {"format": FORMAT, **self.__dict__, "vgm": asdict(self.vgm)}
+        out["curve"] = self.curve.to_dict() if self.curve is not None else None
         return {k: v for k, v in out.items() if v is not None}
 
     @classmethod
@@ -74,6 +79,7 @@ class Checkpoint:
             hyper=dict(content.get("hyper") or {}),
             threshold=DEFAULT_THRESHOLD if threshold is None else float(threshold),
             metrics=dict(content.get("metrics") or {}),
+            curve=PrecisionCurve.from_dict(content["curve"]) if content.get("curve") else None,
             training=dict(content.get("training") or {}),
             state_dict=content.get("state_dict"),
             score=content.get("score"),
