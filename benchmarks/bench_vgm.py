@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import os
 import sys
 import time
 
@@ -119,30 +120,35 @@ def _end_to_end_table(log, count: int, rounds: int) -> None:
 
     validator = Validator.load(DEFAULT, device="cpu")
     samples = _samples(log, count)
-    old = _per_pair_logits(validator, samples, 256)
-    new = validator.predict_samples(samples, batch_size=256)
-    diff = float(np.abs(old - new).max())
-    rows = []
-    results = {}
-    for name, fn in (
+    old = _per_pair_logits(validator, samples, B)
+    diff = float(np.abs(old - validator.predict_samples(samples, batch_size=B)).max())
+    paths = (
         ("per-pair VGMs, dense network (before)", lambda: _per_pair_logits(validator, samples, B)),
         ("batched VGM cells, sparse stem (now)", lambda: validator.predict_samples(samples, B)),
-    ):
-        fn()
-        results[name] = _throughput(fn, count, rounds)
-    base_wall, base_cpu = next(iter(results.values()))
-    for name, (wall, cpu) in results.items():
-        rows.append(
-            [name, f"{wall:.0f}", f"{wall / base_wall:.2f}×"]
-            + [f"{cpu:.0f}", f"{cpu / base_cpu:.2f}×"]
-        )
-    print(
-        f"\n# validation end to end: {count} belgioioso pairs, bundled vgmnet, batch 256, "
-        f"2 cores, torch {torch.get_num_threads()} threads; max |Δp| between the paths {diff:.1e}"
     )
-    print(table(["path", "pairs/s (wall)", "ratio", "pairs per CPU-s", "ratio"], rows))
-    wall = results["batched VGM cells, sparse stem (now)"][0]
-    print(f"target ≥ 3,000 pairs/s (wall): {'met' if wall >= 3000 else 'MISSED'}")
+    rows = []
+    now = 0.0
+    # Two threads is the target; one thread's CPU time is the figure a loaded machine
+    # disturbs least (no thread waits on a descheduled partner).
+    for threads in (2, 1):
+        torch.set_num_threads(threads)
+        base = None
+        for name, fn in paths:
+            fn()
+            wall, cpu = _throughput(fn, count, rounds)
+            base = base or (wall, cpu)
+            now = wall if threads == 2 else now
+            ratios = f"{wall / base[0]:.2f}×", f"{cpu / base[1]:.2f}×"
+            rows.append([name, str(threads), f"{wall:.0f}", ratios[0], f"{cpu:.0f}", ratios[1]])
+    torch.set_num_threads(2)
+    load = " / ".join(f"{x:.1f}" for x in os.getloadavg())
+    print(
+        f"\n# validation end to end: {count} belgioioso pairs, bundled vgmnet, batch {B}, "
+        f"pinned to 2 cores; max |Δp| between the paths {diff:.1e}; load average {load}"
+    )
+    header = ["path", "threads", "pairs/s (wall)", "ratio", "pairs per CPU-s", "ratio"]
+    print(table(header, rows))
+    print(f"target ≥ 3,000 pairs/s (wall, 2 threads): {'met' if now >= 3000 else 'MISSED'}")
 
 
 def main() -> None:

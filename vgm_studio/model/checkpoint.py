@@ -19,7 +19,7 @@ import torch
 
 from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.errors import InputError
-from vgm_studio.model.operating import PrecisionCurve
+from vgm_studio.model.operating import PrecisionCurve, threshold_for_precision
 from vgm_studio.model.registry import MODEL_NAMES
 from vgm_studio.vgm.grid import VGMParams
 
@@ -134,3 +134,27 @@ def load_checkpoint(path: Path, expect_vgm: VGMParams | None = None) -> Checkpoi
             f"{expect_vgm.sigma} m were asked for; retrain or use matching VGMs",
         )
     return checkpoint
+
+
+def precision_threshold(checkpoint: Checkpoint, precision: float, path: Path | None) -> float:
+    """The lowest p(success) cut whose validation precision reaches ``precision``.
+
+    Raises:
+        InputError: The checkpoint keeps no validation curve (written before curves were
+            kept), or no cut on it reaches ``precision``.
+    """
+    curve = checkpoint.curve
+    if curve is None:
+        raise InputError(
+            path,
+            "keeps no validation precision curve, so --loop-precision cannot choose a "
+            "threshold; retrain it or use --loop-threshold",
+        )
+    cut = threshold_for_precision(curve, precision)
+    if cut is None:
+        raise InputError(
+            path,
+            f"no threshold reaches validation precision {precision:g} "
+            f"(best {max(curve.precision):.4f}); ask for less or use --loop-threshold",
+        )
+    return cut

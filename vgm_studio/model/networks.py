@@ -168,6 +168,7 @@ class VGMNet(nn.Module):
     def _stem_affine(self) -> tuple[torch.Tensor, torch.Tensor]:
         """The stem's 1×1 convolution and batch norm as (C_in, C_out) weights and a shift."""
         conv, norm = self.features[0], self.features[1]
+        assert isinstance(conv, nn.Conv2d)
         weight = conv.weight[:, :, 0, 0].T
         shift = conv.bias if conv.bias is not None else torch.zeros_like(weight[0])
         if isinstance(norm, nn.BatchNorm2d):  # not yet folded in by fuse_batch_norm

@@ -12,10 +12,9 @@ import torch
 from numpy.typing import NDArray
 from torch import nn
 
-from vgm_studio.errors import InputError
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
-from vgm_studio.model.checkpoint import Checkpoint, load_checkpoint
+from vgm_studio.model.checkpoint import Checkpoint, load_checkpoint, precision_threshold
 from vgm_studio.model.features import (
     PairSample,
     figures_matrix,
@@ -25,7 +24,6 @@ from vgm_studio.model.features import (
     vgm_batch,
 )
 from vgm_studio.model.networks import VGMNet, fuse_batch_norm
-from vgm_studio.model.operating import threshold_for_precision
 from vgm_studio.model.registry import build_network, entry
 from vgm_studio.model.score import ScoreModel
 from vgm_studio.vgm.grid import VGMParams
@@ -222,25 +220,9 @@ class Validator:
         """The lowest p(success) cut whose validation precision reaches ``precision``.
 
         Raises:
-            InputError: The checkpoint keeps no validation curve (written before curves were
-                kept: retrain it, or add one as benchmarks/default_curve.py does), or no cut
-                on it reaches ``precision``.
+            InputError: No validation curve in the checkpoint, or no cut reaches it.
         """
-        curve = self.checkpoint.curve
-        if curve is None:
-            raise InputError(
-                self.path,
-                "keeps no validation precision curve, so --loop-precision cannot choose a "
-                "threshold; retrain it or use --loop-threshold",
-            )
-        cut = threshold_for_precision(curve, precision)
-        if cut is None:
-            raise InputError(
-                self.path,
-                f"no threshold reaches validation precision {precision:g} "
-                f"(best {max(curve.precision):.4f}); ask for less or use --loop-threshold",
-            )
-        return cut
+        return precision_threshold(self.checkpoint, precision, self.path)
 
     def predict_samples(
         self, samples: Sequence[PairSample], batch_size: int = 256
