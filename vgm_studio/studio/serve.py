@@ -79,9 +79,9 @@ def _start_trainer(studio: Studio, options: TrainerOptions) -> Callable[[], None
     return stop
 
 
-def _predict_then_refresh(studio: Studio, model: Path) -> None:
+def _predict_then_refresh(studio: Studio, model: Path, precision: float | None) -> None:
     try:
-        predict_workspace(studio.store, model)
+        predict_workspace(studio.store, model, precision=precision)
     except Exception as exc:  # a failed model must not take the labeling down
         _warn(f"{model}: no predictions ({exc})")
         return
@@ -93,13 +93,15 @@ def serve(
     config: StudioConfig,
     *,
     model: Path | None = None,
+    precision: float | None = None,
     trainer: TrainerOptions | None = None,
     ready_seconds: float | None = None,
 ) -> None:
     """Starts the studio (and the trainer beside it), says where, and serves until Ctrl-C.
 
     The model's predictions are made in the background: the annotator can start at once, and
-    p(success) appears in the panel when they are ready.
+    p(success) appears in the panel when they are ready. With ``precision`` the model's calls
+    are cut where its validation precision reaches it (``predict_workspace``).
     """
 
     def train_now() -> None:
@@ -110,7 +112,10 @@ def serve(
     stop_trainer = _start_trainer(studio, trainer) if trainer is not None else None
     if model is not None:
         threading.Thread(
-            target=_predict_then_refresh, args=(studio, model), daemon=True, name="predict"
+            target=_predict_then_refresh,
+            args=(studio, model, precision),
+            daemon=True,
+            name="predict",
         ).start()
     when = f" (ready {ready_seconds:.1f} s after start)" if ready_seconds is not None else ""
     _say(f"VGM Studio: {store.count_edges()} edges at {studio.url}{when}")

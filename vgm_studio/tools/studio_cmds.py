@@ -16,10 +16,19 @@ from vgm_studio.tools.options import (
     NoTrainerOpt,
     PortOpt,
     RetrainOpt,
+    number,
     with_read_options,
 )
 
 DemoWorkspaceOpt = Annotated[Path, typer.Option(metavar="DIR", help="Workspace folder.")]
+LoopPrecisionOpt = Annotated[
+    float,
+    typer.Option(
+        help="Cut the model's calls (what it says, the model-disagrees queue) where its "
+        "validation precision reaches this, in [0, 1] (0: the checkpoint's threshold).",
+        callback=number(0, 1),
+    ),
+]
 
 
 def _warn(line: str) -> None:
@@ -57,6 +66,7 @@ def label(
     no_model: Annotated[bool, typer.Option("--no-model", help="Show no model predictions.")] = (
         False
     ),
+    loop_precision: LoopPrecisionOpt = 0.0,
     no_trainer: NoTrainerOpt = False,
     retrain_every: RetrainOpt = 25,
     base: Annotated[
@@ -83,7 +93,8 @@ def label(
     serve(
         store,
         StudioConfig(host=host, port=port, annotator=annotator or default_annotator()),
-        model=choose_model(model, no_model, warn=_warn),
+        model=choose_model(model, no_model, precision=loop_precision or None, warn=_warn),
+        precision=loop_precision or None,
         trainer=None if no_trainer else TrainerOptions.checked(retrain_every, base),
         ready_seconds=time.perf_counter() - start,
     )
@@ -97,6 +108,7 @@ def demo(
     serve_app: Annotated[
         bool, typer.Option("--serve/--no-serve", help="Serve the studio (else prepare and exit).")
     ] = True,
+    loop_precision: LoopPrecisionOpt = 0.0,
     no_trainer: NoTrainerOpt = False,
     retrain_every: RetrainOpt = 25,
 ) -> None:
@@ -108,7 +120,10 @@ def demo(
     start = time.perf_counter()
     if serve_app:
         check_port_free(host, port)
-    store, model = open_demo(workspace, predict=not serve_app, say=typer.echo, warn=_warn)
+    precision = loop_precision or None
+    store, model = open_demo(
+        workspace, predict=not serve_app, precision=precision, say=typer.echo, warn=_warn
+    )
     if not serve_app:
         seconds = time.perf_counter() - start
         typer.echo(f"workspace {workspace} ready: {store.count_edges()} edges ({seconds:.1f} s)")
@@ -118,6 +133,7 @@ def demo(
         store,
         StudioConfig(host=host, port=port, annotator=annotator or default_annotator()),
         model=model,
+        precision=precision,
         trainer=None if no_trainer else TrainerOptions.checked(retrain_every, None),
         ready_seconds=time.perf_counter() - start,
     )
