@@ -106,6 +106,34 @@ def _row(building: str, model: str, labels, probs, checkpoint, seconds: float) -
     ]
 
 
+def _fold_rows(fold, data, origin: list[str], models: list[str], args) -> list[list[str]]:
+    """Trains each model on the fold's training files and tests it on the held-out loops."""
+    from vgm_studio.model.training import TrainConfig, train
+    from vgm_studio.model.validator import Validator
+
+    test = _subset(data, origin, [fold.test])
+    training = _subset(data, origin, fold.train)
+    rows = []
+    for model in models:
+        start = time.perf_counter()
+        out = BUILD / "folds" / f"{fold.held_out}-{model}.pt"
+        config = TrainConfig(
+            model=model,
+            epochs=args.epochs,
+            epoch_size=args.epoch_size,
+            max_train=args.max_train,
+            device="cpu",
+            # The bundled default's inputs (train_default.py: the command's defaults).
+            hyper={"figures": True, "spread": True} if model == "vgmnet" else {},
+        )
+        checkpoint = train(training, config, out, progress=False, log=lambda _line: None)
+        probs = Validator.load(out, device="cpu").predict_samples(test.samples)
+        seconds = time.perf_counter() - start
+        rows.append(_row(fold.held_out, model, test.labels, probs, checkpoint, seconds))
+        print(" | ".join(rows[-1]), flush=True)
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--models", default=",".join(MODELS), help="Comma-separated models.")
@@ -115,8 +143,7 @@ def main() -> None:
     parser.add_argument("--max-train", type=int, default=None, help="Cap training edges.")
     args = parser.parse_args()
     pin_to_cores(2)
-    from vgm_studio.model.training import TrainConfig, read_labelled, train
-    from vgm_studio.model.validator import Validator
+    from vgm_studio.model.training import read_labelled
 
     models = [m for m in args.models.split(",") if m]
     unknown = sorted(set(models) - set(MODELS))
@@ -139,26 +166,7 @@ def main() -> None:
     data = read_labelled(files, progress=False)
     # Which file each edge came from: read_labelled keeps the files' order and each file's.
     origin = [f["path"] for f in data.files for _ in range(f["used"])]
-    rows = []
-    for fold in folds:
-        test = _subset(data, origin, [fold.test])
-        training = _subset(data, origin, fold.train)
-        for model in models:
-            start = time.perf_counter()
-            out = BUILD / "folds" / f"{fold.held_out}-{model}.pt"
-            config = TrainConfig(
-                model=model,
-                epochs=args.epochs,
-                epoch_size=args.epoch_size,
-                max_train=args.max_train,
-                device="cpu",
-                hyper={"figures": True, "spread": True} if model == "vgmnet" else {},
-            )
-            checkpoint = train(training, config, out, progress=False, log=lambda _line: None)
-            probs = Validator.load(out, device="cpu").predict_samples(test.samples)
-            seconds = time.perf_counter() - start
-            rows.append(_row(fold.held_out, model, test.labels, probs, checkpoint, seconds))
-            print(" | ".join(rows[-1]), flush=True)
+    rows = [row for fold in folds for row in _fold_rows(fold, data, origin, models, args)]
     print(
         f"\n# leave-one-building-out, loops of each held-out building; {args.epochs} epochs "
         f"of {args.epoch_size} draws per fold model"
