@@ -176,6 +176,9 @@ def test_checkpoint_round_trip_and_refusals(sim_edges, tmp_path):
     v = Validator.load(out, expect_vgm=VGMParams())
     assert v.name == "score" and v.vgm == VGMParams()
     assert v.metrics["n"] == sum(checkpoint.training["counts"]["validation"].values())
+    curve = v.checkpoint.curve  # kept for --loop-precision
+    assert curve is not None and 1 < len(curve.thresholds) <= v.metrics["n"]
+    assert curve.recall[0] == 1.0 and curve.thresholds == sorted(curve.thresholds)
     again = Validator.load(out)
     np.testing.assert_array_equal(
         v.predict_samples(data.samples[:20]), again.predict_samples(data.samples[:20])
