@@ -242,7 +242,7 @@ class Validator:
         self,
         edges: Sequence[Edge],
         scans: EdgeScans | None = None,
-        batch_size: int = 64,
+        batch_size: int = 256,
         progress: bool = False,
     ) -> NDArray[np.float64]:
         """p(success) for each edge; the edges' logs are read once through ``scans``."""
