@@ -16,6 +16,7 @@ if TYPE_CHECKING:
 
 _LOCK = threading.Lock()
 _LOADED: dict[tuple[str, int, int], Validator] = {}
+_LOADS = [0]
 
 
 def shared_validator(path: Path) -> Validator:
@@ -35,9 +36,13 @@ def shared_validator(path: Path) -> Validator:
         validator = _LOADED.get(key)
         if validator is None:
             validator = _LOADED[key] = Validator.load(path)
+            _LOADS[0] += 1
         return validator
 
 
-def loaded_count() -> int:
-    """How many checkpoints this process holds (a fleet worker reports it)."""
-    return len(_LOADED)
+def load_count() -> int:
+    """How many checkpoints this process has loaded through the cache.
+
+    A fleet worker reports it in each row: one per model, however many logs it ran.
+    """
+    return _LOADS[0]

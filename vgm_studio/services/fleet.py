@@ -4,15 +4,17 @@ Each Ray worker is a long-lived actor that loads the model once and then takes l
 log (``fleet_log.process_log``, the single-log commands' services). Without an address a
 local Ray is started on this machine, so a laptop and a cluster run the same code. A log
 that fails becomes a failed row and the others go on; a worker process that dies is
-restarted by Ray and its log handed out again, up to ``max_attempts`` times. A log whose
+restarted by Ray and the log run again on it, up to ``max_attempts`` times. A log whose
 folder holds a finished row with the same key (the log's sha256, its references and the
 settings) is skipped, so a fleet run stopped half-way resumes where it was.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import time
+import uuid
 from collections import deque
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -55,7 +57,7 @@ class RayOptions:
         workers: Workers (one CPU each; None: one per CPU of the cluster).
         temp_dir: The local Ray's session folder (None: Ray's default); keep it short, Ray
             puts Unix sockets in it.
-        max_attempts: Times a log is handed out when its worker process dies.
+        max_attempts: Times a log is run when its worker process dies under it.
     """
 
     address: str | None = None
@@ -94,32 +96,61 @@ class LogWorker:
 
         shared_validator(Path(model))
 
-    def run(
-        self,
-        entry: ManifestEntry,
-        settings: FleetSettings,
-        out: str,
-        log_sha: str,
-        key: str,
-        attempt: int,
-    ) -> dict[str, Any]:
-        """The log's row; an error in this log becomes a failed row, never an exception."""
-        from vgm_studio.model.cache import loaded_count
+    def run(self, job: LogJob) -> dict[str, Any]:
+        """The log's row; an error in this log becomes a failed row, never an exception.
 
-        folder = log_folder(Path(out), entry)
+        A log whose worker died under it is run again by Ray on the restarted worker; the
+        ``running.json`` it left behind counts the attempts, and past ``max_attempts`` the
+        log is given up as a failed row instead of being run once more.
+        """
+        from vgm_studio.model.cache import load_count
+
+        entry = job.entry
+        folder = log_folder(job.out, entry)
         folder.mkdir(parents=True, exist_ok=True)
         running = folder / RUNNING_FILE
-        write_json_atomically(running, {"pid": os.getpid(), "attempt": attempt})
-        try:
-            row = process_log(entry, settings, Path(out), log_sha, key)
-        except InputError as exc:
-            row = {**base_row(entry, log_sha, key), "error": str(exc)}
-        except Exception as exc:  # a bug in one log must not stop the fleet's other logs
-            row = {**base_row(entry, log_sha, key), "error": f"{type(exc).__name__}: {exc}"}
-        row.update(attempts=attempt, worker_pid=os.getpid(), models_loaded=loaded_count())
+        attempt = _previous_attempts(running, job.run_id) + 1
+        write_json_atomically(
+            running, {"pid": os.getpid(), "attempt": attempt, "run_id": job.run_id}
+        )
+        row = base_row(entry, job.log_sha, job.key)
+        if attempt > job.max_attempts:
+            row["error"] = f"its worker died {attempt - 1} times while running it; given up"
+        else:
+            try:
+                row = process_log(entry, job.settings, job.out, job.log_sha, job.key)
+            except InputError as exc:
+                row["error"] = str(exc)
+            except Exception as exc:  # a bug in one log must not stop the fleet's other logs
+                row["error"] = f"{type(exc).__name__}: {exc}"
+        row.update(attempts=attempt, worker_pid=os.getpid(), model_loads=load_count())
         write_json_atomically(folder / "row.json", row)
         running.unlink(missing_ok=True)
         return row
+
+
+@dataclass(frozen=True)
+class LogJob:
+    """One log handed to a worker, with what it needs to run it and to count attempts."""
+
+    entry: ManifestEntry
+    settings: FleetSettings
+    out: Path
+    log_sha: str
+    key: str
+    run_id: str
+    max_attempts: int
+
+
+def _previous_attempts(running: Path, run_id: str) -> int:
+    """Attempts of this fleet run on the log before now (a running file left by a dead worker)."""
+    try:
+        doc = json.loads(running.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return 0
+    if not isinstance(doc, dict) or doc.get("run_id") != run_id:
+        return 0  # left by an earlier fleet run that was stopped: not this run's attempt
+    return int(doc.get("attempt", 0))
 
 
 def run_fleet(
@@ -206,9 +237,9 @@ def ray_session(options: RayOptions) -> Iterator[tuple[Any, int]]:
 
 
 def _actor_class(ray: Any) -> Any:
-    # max_restarts: a worker whose process dies comes back (model loaded again); the log it
-    # held is handed out again by the driver, which counts the attempts.
-    return ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=0)(LogWorker)
+    # A worker whose process dies comes back (its model loaded again), and the call it was
+    # running is retried on it; the worker counts the attempts and gives the log up.
+    return ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=-1)(LogWorker)
 
 
 def _dispatch(
@@ -224,40 +255,30 @@ def _dispatch(
     """Hands logs to idle workers until every log has a row."""
     actor = _actor_class(ray)
     pool = [actor.remote(str(settings.model)) for _ in range(workers)]
-    queue: deque[tuple[ManifestEntry, int]] = deque((e, 1) for e in todo)
+    run_id = uuid.uuid4().hex
+    queue = deque(todo)
     idle = list(range(workers))
-    pending: dict[Any, tuple[ManifestEntry, int, int]] = {}
+    pending: dict[Any, tuple[ManifestEntry, int]] = {}
     rows: dict[str, dict[str, Any]] = {}
     bar = tqdm(total=len(todo), desc="fleet", unit="log", disable=None if progress else True)
-
-    def submit() -> None:
+    while queue or pending:
         while queue and idle:
-            (entry, attempt), w = queue.popleft(), idle.pop()
+            entry, w = queue.popleft(), idle.pop()
             log_sha, key = keys[entry.name]
-            ref = pool[w].run.remote(entry, settings, str(out), log_sha, key, attempt)
-            pending[ref] = (entry, w, attempt)
-
-    submit()
-    while pending:
+            job = LogJob(entry, settings, out, log_sha, key, run_id, options.max_attempts)
+            pending[pool[w].run.remote(job)] = (entry, w)
         (ref,), _ = ray.wait(list(pending), num_returns=1)
-        entry, w, attempt = pending.pop(ref)
+        entry, w = pending.pop(ref)
         idle.append(w)
         try:
             row = ray.get(ref)
-        except ray.exceptions.RayError as exc:  # the worker process died, not the log's error
-            if attempt < options.max_attempts:
-                queue.appendleft((entry, attempt + 1))
-                submit()
-                continue
-            log_sha, key = keys[entry.name]
-            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            row = {**base_row(entry, log_sha, key), "error": f"worker lost: {first}"}
-            row["attempts"] = attempt
+        except ray.exceptions.RayError as exc:  # Ray gave the worker up, not the log's error
+            first = (str(exc).strip() or type(exc).__name__).splitlines()[0]
+            row = {**base_row(entry, *keys[entry.name]), "error": f"worker lost: {first}"}
         rows[entry.name] = row
         bar.set_postfix_str(f"{entry.name} {row['status']}", refresh=False)
         bar.update(1)
-        submit()
     bar.close()
-    for actor_handle in pool:
-        ray.kill(actor_handle)
+    for handle in pool:
+        ray.kill(handle)
     return rows

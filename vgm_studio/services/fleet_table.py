@@ -55,6 +55,7 @@ _COLUMNS: tuple[tuple[str, str], ...] = (
     ("seconds", "float64"),
     ("attempts", "int64"),
     ("worker_pid", "int64"),
+    ("model_loads", "int64"),
     ("skipped", "bool_"),
 )
 
