@@ -91,9 +91,13 @@ class LogWorker:
     process dies.
     """
 
-    def __init__(self, model: str) -> None:
+    def __init__(self, model: str, threads: int = 1) -> None:
+        import torch
+
         from vgm_studio.model.cache import shared_validator
 
+        # A worker holds one CPU: more torch threads would fight the other workers for it.
+        torch.set_num_threads(threads)
         shared_validator(Path(model))
 
     def run(self, job: LogJob) -> dict[str, Any]:
