@@ -206,7 +206,12 @@ def slam_columns(doc: dict[str, Any]) -> dict[str, Any]:
         "loops_total": doc["loops_total"],
         "loops_kept": doc["loops_kept"],
         "loops_rejected": doc["loops_total"] - doc["loops_kept"],
+        # Where loops came from and who turned them down, when the run says so (null if not).
+        "loops_validator_kept": doc.get("loops_validator_kept"),
+        "loops_consistency_rejected": doc.get("loops_consistency_rejected"),
     }
+    for source in ("window", "place"):
+        cols[f"loops_by_{source}"] = (doc.get("loops_by_source") or {}).get(source)
     for trajectory in ("odometry", "before", "after"):
         errors = doc.get(trajectory) or {}
         cols[f"{trajectory}_trans_mean_m"] = errors.get("trans_mean")
