@@ -118,6 +118,7 @@ class LogWorker:
             running, {"pid": os.getpid(), "attempt": attempt, "run_id": job.run_id}
         )
         row = base_row(entry, job.log_sha, job.key)
+        start = time.perf_counter()
         if attempt > job.max_attempts:
             row["error"] = f"its worker died {attempt - 1} times while running it; given up"
         else:
@@ -127,6 +128,7 @@ class LogWorker:
                 row["error"] = str(exc)
             except Exception as exc:  # a bug in one log must not stop the fleet's other logs
                 row["error"] = f"{type(exc).__name__}: {exc}"
+        row.setdefault("seconds", time.perf_counter() - start)  # a failed log's time too
         row.update(attempts=attempt, worker_pid=os.getpid(), model_loads=load_count())
         write_json_atomically(folder / "row.json", row)
         running.unlink(missing_ok=True)
