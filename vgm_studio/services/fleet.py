@@ -224,14 +224,16 @@ def ray_session(options: RayOptions) -> Iterator[tuple[Any, int]]:
         ) from None
     started = not ray.is_initialized()
     if started:
-        kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False}
+        # Workers' output (SLAM's progress bars) stays in Ray's logs: the driver shows one bar.
+        kwargs: dict[str, Any] = {"log_to_driver": False}
         try:
             if options.address is not None:
                 ray.init(address=options.address, **kwargs)
             else:
                 if options.temp_dir is not None:
                     kwargs["_temp_dir"] = str(options.temp_dir)
-                ray.init(num_cpus=options.num_cpus or os.cpu_count() or 1, **kwargs)
+                cpus = options.num_cpus or os.cpu_count() or 1
+                ray.init(num_cpus=cpus, include_dashboard=False, **kwargs)
         except (ConnectionError, RuntimeError, ValueError) as exc:
             where = options.address or "a local Ray"
             raise InputError(None, f"cannot start or reach {where}: {exc}") from None
