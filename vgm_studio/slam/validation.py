@@ -104,11 +104,11 @@ class EdgeValidator:
 
 
 def _load(path: Path | None, validator: str) -> Validator:
-    from vgm_studio.model.validator import Validator
+    from vgm_studio.model.cache import shared_validator
 
     if path is None:
         raise InputError(None, f"--validator {validator} needs --model, a checkpoint of that model")
-    model = Validator.load(path)
+    model = shared_validator(path)
     if model.name not in VALIDATOR_MODELS[validator]:
         raise InputError(path, f"is a {model.name} checkpoint, not one for --validator {validator}")
     return model
