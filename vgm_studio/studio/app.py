@@ -7,12 +7,9 @@ claimed and not handed to another.
 
 from __future__ import annotations
 
-import getpass
-import socket
 import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
 
 import viser
 
@@ -21,9 +18,9 @@ from vgm_studio.labels.agreement import agreement
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
+from vgm_studio.studio.config import StudioConfig, check_port_free, default_annotator
 from vgm_studio.studio.gate import Gate, guarded_serve, is_loopback, new_token
 from vgm_studio.studio.panel import (
-    Panel,
     agreement_text,
     build_panel,
     code,
@@ -34,76 +31,13 @@ from vgm_studio.studio.panel import (
 )
 from vgm_studio.studio.queues import Queue, Snapshot, order
 from vgm_studio.studio.scene import TabScene
+from vgm_studio.studio.tab import Tab
 from vgm_studio.studio.view import EdgeView, ViewCache
-from vgm_studio.vgm.grid import VGMParams
+
+# Where commands have always imported them from.
+__all__ = ["Studio", "StudioConfig", "check_port_free", "default_annotator"]
 
 PREFETCH = 3
-
-
-def default_annotator() -> str:
-    try:
-        return getpass.getuser()
-    except (KeyError, OSError):
-        return "annotator"
-
-
-@dataclass
-class StudioConfig:
-    """How the studio serves.
-
-    Attributes:
-        host: Interface to listen on; 127.0.0.1 keeps it on this machine.
-        port: TCP port.
-        annotator: Name a new tab starts with.
-        queue: Queue a new tab starts in.
-        vgm: Grid the heatmap is drawn on.
-        title: Shown in the browser's title bar.
-        token: Required in the URL's path (``http://HOST:PORT/TOKEN``); None asks for none on
-            loopback, and ``start`` makes one up for any other host.
-    """
-
-    host: str = "127.0.0.1"
-    port: int = 8080
-    annotator: str = field(default_factory=default_annotator)
-    queue: Queue = Queue.unlabelled
-    vgm: VGMParams = field(default_factory=VGMParams)
-    title: str = "VGM Studio"
-    token: str | None = None
-
-
-@dataclass
-class _Tab:
-    """One browser tab's state. ``lock`` keeps its key presses in order."""
-
-    client: viser.ClientHandle
-    panel: Panel
-    queue: Queue
-    order: list[str]
-    scene: TabScene
-    index: int = 0
-    # (event id, edge id); a skip has no event to take back, only a place to return to.
-    undo: list[tuple[int | None, str]] = field(default_factory=list)
-    lock: threading.RLock = field(default_factory=threading.RLock)
-    failed: str | None = None  # why the edge shown cannot be drawn; labels are refused then
-
-    @property
-    def edge_id(self) -> str | None:
-        return self.order[self.index] if 0 <= self.index < len(self.order) else None
-
-
-def check_port_free(host: str, port: int) -> None:
-    """Fails before the server starts when another program holds the port.
-
-    Raises:
-        InputError: The port is in use or the host is not an address of this machine.
-    """
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            probe.bind((host, port))
-        except OSError as exc:
-            reason = "is in use; pass another --port" if exc.errno == 98 else f"({exc.strerror})"
-            raise InputError(f"{host}:{port}", f"cannot listen: the port {reason}") from None
 
 
 class Studio:
@@ -124,7 +58,7 @@ class Studio:
         self._edge_ids = store.edge_ids()
         self._edges: dict[str, Edge] = {}
         self._predictions = store.predictions()
-        self._tabs: dict[int, _Tab] = {}
+        self._tabs: dict[int, Tab] = {}
         self._claims: dict[str, int] = {}
         self._lock = threading.RLock()
         self._prefetcher = ThreadPoolExecutor(max_workers=1, thread_name_prefix="prefetch")
@@ -200,7 +134,7 @@ class Studio:
         for tab in list(self._tabs.values()):
             tab.panel.trainer.content = text
 
-    def _train_now(self, tab: _Tab) -> None:
+    def _train_now(self, tab: Tab) -> None:
         if self.train_now is None:
             tab.client.add_notification(
                 "No trainer", "This studio runs without one.", auto_close_seconds=3.0
@@ -217,7 +151,7 @@ class Studio:
         preds = self._predictions
         return Snapshot(self._edge_ids, self.store.label_map(), preds.p, preds.threshold)
 
-    def _tab_actions(self, tab: _Tab) -> dict[str, Callable[[], None]]:
+    def _tab_actions(self, tab: Tab) -> dict[str, Callable[[], None]]:
         return {
             "success": lambda: self._label(tab, "success"),
             "failure": lambda: self._label(tab, "failure"),
@@ -236,7 +170,7 @@ class Studio:
         panel = build_panel(client, self.config.annotator, self.config.queue, actions)
         panel.trainer.content = self._trainer_text
         panel.layers.content = layers_text("points and VGM")
-        tab = _Tab(
+        tab = Tab(
             client,
             panel,
             self.config.queue,
@@ -266,7 +200,7 @@ class Studio:
 
     # -- actions -------------------------------------------------------------------------
 
-    def _label(self, tab: _Tab, label: str) -> None:
+    def _label(self, tab: Tab, label: str) -> None:
         with tab.lock:
             edge_id = tab.edge_id
             if edge_id is None:
@@ -283,7 +217,7 @@ class Studio:
             tab.panel.note.value = ""  # type: ignore[misc]  # viser's setter, unseen by mypy
             self._move(tab, +1)
 
-    def _skip(self, tab: _Tab) -> None:
+    def _skip(self, tab: Tab) -> None:
         with tab.lock:
             if tab.edge_id is not None:
                 annotator = tab.panel.annotator.value.strip() or self.config.annotator
@@ -291,7 +225,7 @@ class Studio:
                 tab.undo.append((None, tab.edge_id))
             self._move(tab, +1)
 
-    def _undo(self, tab: _Tab) -> None:
+    def _undo(self, tab: Tab) -> None:
         with tab.lock:
             if not tab.undo:
                 tab.client.add_notification("Nothing to undo", "", auto_close_seconds=2.0)
@@ -309,35 +243,35 @@ class Studio:
             self._claim(tab, edge_id)
             self._show(tab)
 
-    def _step(self, tab: _Tab, step: int) -> None:
+    def _step(self, tab: Tab, step: int) -> None:
         with tab.lock:
             self._move(tab, step)
 
-    def _toggle_guess(self, tab: _Tab) -> None:
+    def _toggle_guess(self, tab: Tab) -> None:
         # Setting the checkbox fires its on_update, which redraws.
         tab.panel.show_guess.value = not tab.panel.show_guess.value  # type: ignore[misc]
 
-    def _redraw(self, tab: _Tab) -> None:
+    def _redraw(self, tab: Tab) -> None:
         with tab.lock:
             self._show(tab)
 
-    def _lens_changed(self, tab: _Tab) -> None:
+    def _lens_changed(self, tab: Tab) -> None:
         with tab.lock:
             tab.scene.lens_changed()
 
-    def _cycle_layers(self, tab: _Tab) -> None:
+    def _cycle_layers(self, tab: Tab) -> None:
         with tab.lock:
             view = self._loaded_view(tab)
             layers = tab.scene.cycle_layers(view is not None and view.reference is not None)
             tab.panel.layers.content = layers_text(layers.value)
 
-    def _loaded_view(self, tab: _Tab) -> EdgeView | None:
+    def _loaded_view(self, tab: Tab) -> EdgeView | None:
         edge_id = tab.edge_id
         if edge_id is None or tab.failed is not None:
             return None
         return self._views.get(self._edge(edge_id))
 
-    def _switch_queue(self, tab: _Tab, queue: Queue) -> None:
+    def _switch_queue(self, tab: Tab, queue: Queue) -> None:
         with tab.lock:
             if queue is tab.queue:
                 return
@@ -348,14 +282,14 @@ class Studio:
 
     # -- moving and showing --------------------------------------------------------------
 
-    def _claim(self, tab: _Tab, edge_id: str | None) -> None:
+    def _claim(self, tab: Tab, edge_id: str | None) -> None:
         with self._lock:
             for e in [e for e, c in self._claims.items() if c == tab.client.client_id]:
                 del self._claims[e]
             if edge_id is not None:
                 self._claims[edge_id] = tab.client.client_id
 
-    def _move(self, tab: _Tab, step: int) -> None:
+    def _move(self, tab: Tab, step: int) -> None:
         """Moves ``step`` along the queue; unlabelled queues go to the next free unlabelled edge."""
         if tab.queue.hands_out_unlabelled and step > 0:
             labels = self.store.label_map()
@@ -378,7 +312,7 @@ class Studio:
             self._claim(tab, tab.edge_id)
         self._show(tab)
 
-    def _show(self, tab: _Tab, draw_scene: bool = True) -> None:
+    def _show(self, tab: Tab, draw_scene: bool = True) -> None:
         edge_id = tab.edge_id
         labels = self.store.label_map()
         labelled = sum(1 for e in self._edge_ids if labels.get(e))
@@ -401,7 +335,7 @@ class Studio:
             ) + (f"  \n{code(edge_id)}" if edge_id else "")
         self._prefetch(tab)
 
-    def _show_edge(self, tab: _Tab, edge_id: str, votes: dict[str, str], draw_scene: bool) -> None:
+    def _show_edge(self, tab: Tab, edge_id: str, votes: dict[str, str], draw_scene: bool) -> None:
         """The edge's facts, and (``draw_scene``) its scene and pictures, or why it cannot be."""
         panel = tab.panel
         edge = self._edge(edge_id)
@@ -443,7 +377,7 @@ class Studio:
         except (OSError, ValueError) as exc:  # a log that changed under a running studio
             return None, f"{type(exc).__name__} while reading the log of edge {edge.edge_id}"
 
-    def _prefetch(self, tab: _Tab) -> None:
+    def _prefetch(self, tab: Tab) -> None:
         upcoming = tab.order[tab.index + 1 : tab.index + 1 + PREFETCH]
         for edge_id in upcoming:
             self._prefetcher.submit(self._views.get, self._edge(edge_id))
