@@ -64,12 +64,11 @@ def _tile(channel: NDArray[np.float32], title: str) -> NDArray[np.uint8]:
     values = (np.clip(pooled / peak, 0, 1) ** GAMMA * 255).astype(np.uint8)
     coloured = cv2.applyColorMap(values, cv2.COLORMAP_INFERNO)[..., ::-1]
     coloured[pooled <= 0] = BACKGROUND_RGB.astype(np.uint8)
-    scale = max(1, _TILE // max(coloured.shape[:2]))
-    big = cv2.resize(
-        coloured[::-1],  # rows run along +y; images run down
-        (coloured.shape[1] * scale, coloured.shape[0] * scale),
-        interpolation=cv2.INTER_NEAREST,
-    )
+    # Nearest-neighbour up to the tile: cells stay sharp squares, and a 20 m by 3 m corridor
+    # crop fills the tile's width instead of sitting in its middle.
+    scale = _TILE / max(coloured.shape[:2])
+    size = (max(1, round(coloured.shape[1] * scale)), max(1, round(coloured.shape[0] * scale)))
+    big = cv2.resize(coloured[::-1], size, interpolation=cv2.INTER_NEAREST)  # rows run along +y
     tile = np.full((_TILE + 16, _TILE, 3), BACKGROUND_RGB, dtype=np.uint8)
     y0 = 16 + (_TILE - big.shape[0]) // 2
     x0 = (_TILE - big.shape[1]) // 2
