@@ -86,9 +86,10 @@ class Studio:
             self.config.token = new_token()
         with guarded_serve(Gate(self.config.host, self.config.token)):
             server = viser.ViserServer(host=self.config.host, port=self.config.port, verbose=False)
-        server.gui.configure_theme(
-            titlebar_content=None, control_layout="fixed", control_width="large", dark_mode=True
-        )
+        server.gui.configure_theme(titlebar_content=None, control_width="large", dark_mode=True)
+        # Docked, not floating: the 3D view ends where the panel begins, so a framed pair is
+        # never hidden under it.
+        server.gui.main_panel.dock_right()
         server.scene.set_up_direction("+z")
         server.scene.world_axes.visible = False
         # A flat top-down view needs no shadows, and shadow passes cost the most where the
