@@ -93,7 +93,9 @@ def test_label_keys_do_not_move_the_camera_and_each_pair_is_framed(studio):
         for i in range(PRESSES):
             tab.press("eq"[i % 2])
         assert tab.position()[0] == 1
-        assert _same_size(first, _box(_view_pixels(tab)))
+        after = _box(_view_pixels(tab))
+        print(f"pair on screen: {first[2:]} px before, {after[2:]} px after {PRESSES} presses")
+        assert _same_size(first, after)
         # The mouse still zooms; R frames the pair again.
         tab.page.mouse.move(500, 400)
         tab.page.mouse.wheel(0, 600)
