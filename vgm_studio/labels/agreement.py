@@ -55,3 +55,20 @@ def agreement(labels: dict[str, dict[str, str]]) -> list[PairAgreement]:
         for (a, b), pairs in shared.items()
     ]
     return sorted(out, key=lambda p: (-p.shared, p.first, p.second))
+
+
+def _printable(name: str, limit: int = 40) -> str:
+    """A name as a terminal may show it: no escape sequences or other control characters."""
+    clean = "".join(c if c.isprintable() else "?" for c in name)
+    return clean if len(clean) <= limit else clean[: limit - 1] + "…"
+
+
+def agreement_lines(pairs: list[PairAgreement]) -> list[str]:
+    """The pairs as aligned text lines (a header first), for a terminal."""
+    names = [f"{_printable(p.first)} · {_printable(p.second)}" for p in pairs]
+    width = max([len(n) for n in names] + [len("annotators")])
+    lines = [f"{'annotators':<{width}}  shared  agreed  Cohen's kappa"]
+    for pair, name in zip(pairs, names, strict=True):
+        kappa = "undefined" if pair.kappa is None else f"{pair.kappa:.3f}"
+        lines.append(f"{name:<{width}}  {pair.shared:>6}  {pair.agreed:>6}  {kappa}")
+    return lines
