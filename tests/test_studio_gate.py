@@ -105,3 +105,15 @@ def test_a_rebound_name_is_refused_on_loopback():
     assert Gate("0.0.0.0", "t").refusal(upgrade("studio.lan:8080")) is not None  # no token
     ok = upgrade("studio.lan:8080")
     assert Gate("0.0.0.0", "t").refusal(Request("/t", ok.headers)) is None
+
+
+def test_only_the_page_is_served():
+    from websockets.datastructures import Headers
+    from websockets.http11 import Request
+
+    from vgm_studio.studio.gate import Gate
+
+    page = Headers({"Host": "localhost:8080"})
+    assert Gate("127.0.0.1").refusal(Request("/", page)) is None
+    assert Gate("127.0.0.1").refusal(Request("/etc/passwd", page)) == (404, "not found")
+    assert Gate("0.0.0.0", "t").refusal(Request("/", page))[0] == 403  # type: ignore[index]

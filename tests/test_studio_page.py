@@ -136,6 +136,9 @@ def test_the_vgm_heatmap_is_visible_and_v_steps_through_the_layers(studio, artif
         assert points_magenta < 20 and points_green < green / 4
         panel_images = tab.page.locator("img").count()
         assert panel_images >= 2  # the VGM channels and the minimap
+        # At 1400×850, Train now is in view without scrolling.
+        box = tab.page.get_by_role("button", name="Train now").bounding_box()
+        assert box is not None and box["y"] + box["height"] <= 850
 
 
 PAYLOADS = (

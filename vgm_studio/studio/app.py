@@ -262,15 +262,8 @@ class Studio:
 
     def _cycle_layers(self, tab: Tab) -> None:
         with tab.lock:
-            view = self._loaded_view(tab)
-            layers = tab.scene.cycle_layers(view is not None and view.reference is not None)
+            layers = tab.scene.cycle_layers()
             tab.panel.layers.content = layers_text(layers.value)
-
-    def _loaded_view(self, tab: Tab) -> EdgeView | None:
-        edge_id = tab.edge_id
-        if edge_id is None or tab.failed is not None:
-            return None
-        return self._views.get(self._edge(edge_id))
 
     def _switch_queue(self, tab: Tab, queue: Queue) -> None:
         with tab.lock:

@@ -85,6 +85,8 @@ class Gate:
     def refusal(self, request: Request) -> tuple[int, str] | None:
         """Why a request is refused, as (HTTP status, reason), or None to let it through."""
         if not self._path_ok(request.path):
+            if self.token is None:
+                return http.HTTPStatus.NOT_FOUND, "not found"
             return http.HTTPStatus.FORBIDDEN, "this studio needs its address with the token"
         if request.headers.get("Upgrade", "").lower() != "websocket":
             return None

@@ -201,10 +201,11 @@ class TabScene:
             if node is not None and node.visible != visible:
                 node.visible = visible
 
-    def cycle_layers(self, has_reference: bool) -> Layers:
+    def cycle_layers(self) -> Layers:
+        """Steps to the next layers (V) and shows them on the pair drawn now."""
         self.layers = self.layers.next()
-        if self.nodes:
-            self._apply_layers(has_reference)
+        if self._shown is not None:
+            self._apply_layers(self._shown[0].reference is not None)
             self._size_points()
         return self.layers
 
