@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
-from _common import REPO, machine, pin_to_cores, table
+from _common import machine, pin_to_cores, table
 
 if TYPE_CHECKING:
     from vgm_studio.labels import LabelStore
@@ -157,11 +157,12 @@ class Run:
 
 
 def run_order(order: str, edges: Path, work: Path, args: argparse.Namespace) -> Run:
+    from studio_browser import StudioPage, chromium, free_port
+
     from vgm_studio.datasets import ReadOptions
     from vgm_studio.labels import LabelStore
-    from vgm_studio.studio.browser import StudioPage, chromium, free_port
-    from vgm_studio.tools.studio_cmds import fill_workspace
     from vgm_studio.trainer import registry
+    from vgm_studio.workspace import fill_workspace
 
     ws = work / f"ws-{order}"
     store = LabelStore(ws)

@@ -24,8 +24,7 @@ import threading
 from pathlib import Path
 
 from _common import REPO, machine, table
-
-from vgm_studio.studio.browser import StudioPage, chromium, free_port, studio_process
+from studio_browser import StudioPage, chromium, free_port, studio_process
 
 DEMO_LOG = REPO / "datasets" / "demo-seed0.log"
 

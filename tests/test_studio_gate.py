@@ -21,7 +21,7 @@ PROTOCOL = f"viser-v{viser.__version__}"
 @pytest.fixture
 def running(office_edges, tmp_path, request):
     """A studio on a free port; ``request.param`` is (host, token)."""
-    from vgm_studio.studio.browser import free_port
+    from benchmarks.studio_browser import free_port
 
     host, token = getattr(request, "param", ("127.0.0.1", None))
     store = LabelStore(tmp_path / "ws")

@@ -15,10 +15,10 @@ import cv2
 import numpy as np
 import pytest
 
+from benchmarks.studio_browser import StudioPage, chromium, chromium_path, free_port
 from vgm_studio.labels import LabelRecord, LabelStore
 from vgm_studio.matching.edges import read_edges
 from vgm_studio.studio.app import Studio, StudioConfig
-from vgm_studio.studio.browser import StudioPage, chromium, chromium_path, free_port
 
 pytestmark = pytest.mark.slow
 # The camera test's presses; 500 is the target run by hand, fewer keep CI short.
