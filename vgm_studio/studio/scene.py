@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 import viser
+from numpy.typing import NDArray
 
 from vgm_studio.studio.view import (
     CUR_RGB,
@@ -30,6 +31,7 @@ _FALLBACK_FOV = math.radians(50.0)  # viser's default, until the browser reports
 _FALLBACK_ASPECT = 1.6
 _FALLBACK_PIXELS = 800
 _MIN_HEIGHT = 2.0  # metres: a tiny pair is not blown up past a few cells per pixel
+CAMERA_HEIGHT = 10.0  # the fixed camera's height, in the fitted scene's units
 
 
 class Layers(str, Enum):
@@ -46,7 +48,9 @@ class Layers(str, Enum):
 
 @dataclass(frozen=True)
 class Framing:
-    """A top-down camera over (x, y) from ``height`` metres up.
+    """The top-down view of a pair: a camera over (x, y) from ``height`` metres up.
+
+    ``TabScene`` shows it by moving and scaling the pair under its fixed camera instead.
 
     Attributes:
         x: Centre of the view, metres.
@@ -97,8 +101,11 @@ def framing(
 class TabScene:
     """The nodes of one tab's scene, made on the first edge and updated after.
 
-    Updating a node's data is much cheaper for the browser than removing and adding it again:
-    on a machine without a GPU that was most of a click's latency.
+    The camera stays where it was put once, straight down from ``CAMERA_HEIGHT``; framing a
+    pair moves and scales the pair's geometry into that view instead. Moving viser's camera
+    costs the browser a camera round trip and extra frames, a third of a click's latency
+    without a GPU; the points, image and pose marks are sent for every edge anyway.
+    Updating a node's data is much cheaper than removing and adding it again.
     """
 
     def __init__(self, client: viser.ClientHandle) -> None:
@@ -109,53 +116,66 @@ class TabScene:
         self._shown: tuple[EdgeView, PlacedPair] | None = None
 
     def show(self, view: EdgeView, placed: PlacedPair, reframe: bool = True) -> None:
-        """Draws the pair; ``reframe`` puts the camera over it (a new edge or placement)."""
-        if not self.nodes:
-            self._make(view, placed)
-        else:
-            image = self.nodes["vgm"]
-            image.image = placed.heatmap_rgb
-            image.render_width, image.render_height = placed.heatmap_size
-            image.position = (*placed.heatmap_centre, -0.01)
-            self.nodes["previous"].points = view.prev
-            self.nodes["current"].points = placed.cur
-            poses = self.nodes["poses"]
-            poses.points, poses.colors = pose_marks(placed.pose, view.reference)
-        if view.reference is not None:
-            self.nodes["reference_scan"].points = view.reference[1]
-        self._apply_layers(view.reference is not None)
+        """Draws the pair; ``reframe`` fits it to the view anew (a new edge or placement)."""
         self._shown = (view, placed)
-        if reframe:
-            self._reframe()
+        if reframe or self.frame is None:
+            self.frame = framing(view, placed, self._lens())
+        self._draw()
 
-    def _reframe(self) -> None:
-        if self._shown is None:
-            return
-        self.frame = framing(*self._shown, self._lens())
+    def _draw(self) -> None:
+        assert self._shown is not None and self.frame is not None
+        view, placed = self._shown
+        f = self.frame
+        centre, scale = np.array([f.x, f.y]), CAMERA_HEIGHT / f.height
+
+        def fit(xyz: NDArray[np.float32]) -> NDArray[np.float32]:
+            out = xyz.copy()
+            out[..., :2] = (xyz[..., :2] - centre) * scale
+            return out
+
+        first = not self.nodes
+        if first:
+            self._make(view, placed)
+            self.reset_view()
+        image = self.nodes["vgm"]
+        image.image = placed.heatmap_rgb
+        width, height = placed.heatmap_size
+        image.render_width, image.render_height = width * scale, height * scale
+        hx, hy = (np.array(placed.heatmap_centre) - centre) * scale
+        image.position = (float(hx), float(hy), -0.01)
+        self.nodes["previous"].points = fit(view.prev)
+        self.nodes["current"].points = fit(placed.cur)
+        segments, colours = pose_marks(placed.pose, view.reference)
+        self.nodes["poses"].points, self.nodes["poses"].colors = fit(segments), colours
+        if view.reference is not None:
+            self.nodes["reference_scan"].points = fit(view.reference[1])
+        self._apply_layers(view.reference is not None)
         self._size_points()
-        self.reset_view()
 
     def lens_changed(self) -> None:
-        """Frames the pair again when the browser's view changed shape (a resize, the panel).
+        """Fits the pair again when the browser's view changed shape (a resize, the panel).
 
         Called on every camera report; a pan or zoom by the annotator keeps the lens, so it
         is left alone.
         """
-        if self.frame is None:
+        if self.frame is None or self._shown is None:
             return
-        fov, aspect, pixels = self._lens()
+        fov, aspect, pixels = lens = self._lens()
         old_fov, old_aspect, old_pixels = self.frame.lens
         if (
             abs(aspect - old_aspect) > 0.01 * old_aspect
             or abs(fov - old_fov) > 1e-3
             or pixels != old_pixels
         ):
-            self._reframe()
+            self.frame = framing(*self._shown, lens)
+            self._draw()
 
     def _size_points(self) -> None:
         if self.frame is None:
             return
+        # In the fitted scene a metre of the pair is CAMERA_HEIGHT / height units.
         size = POINT_PIXELS[self.layers.value] / self.frame.pixels_per_metre
+        size *= CAMERA_HEIGHT / self.frame.height
         for name in ("previous", "current", "reference_scan"):
             node = self.nodes[name]
             if not math.isclose(node.point_size, size, rel_tol=0.02):
@@ -166,12 +186,11 @@ class TabScene:
         self.nodes["vgm"] = scene.add_image(
             "/vgm",
             placed.heatmap_rgb,
-            render_width=placed.heatmap_size[0],
-            render_height=placed.heatmap_size[1],
+            render_width=1.0,
+            render_height=1.0,
             format="png",
             cast_shadow=False,
             receive_shadow=False,
-            position=(*placed.heatmap_centre, -0.01),
         )
         self.nodes["previous"] = scene.add_point_cloud(
             "/scans/previous", view.prev, PREV_RGB, point_size=POINT_SIZE
@@ -228,13 +247,10 @@ class TabScene:
         return fov, aspect, int(pixels) if pixels else _FALLBACK_PIXELS
 
     def reset_view(self) -> None:
-        """Puts the camera straight above the framed pair, +x right and +y up."""
-        if self.frame is None:
-            return
-        f = self.frame
+        """Puts the camera back straight above the fitted pair, +x right and +y up."""
         camera = self.client.camera
         camera.up_direction = (0.0, 0.0, 1.0)
         # A hair south of straight down: looking exactly along "up" leaves the view's roll
         # undefined; this keeps +y up on screen.
-        camera.position = (f.x, f.y - 1e-4 * f.height, f.height)
-        camera.look_at = (f.x, f.y, 0.0)
+        camera.position = (0.0, -1e-4 * CAMERA_HEIGHT, CAMERA_HEIGHT)
+        camera.look_at = (0.0, 0.0, 0.0)
