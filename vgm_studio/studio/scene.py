@@ -137,12 +137,11 @@ class TabScene:
         if first:
             self._make(view, placed)
             self.reset_view()
-        image = self.nodes["vgm"]
-        image.image = placed.heatmap_rgb
-        width, height = placed.heatmap_size
-        image.render_width, image.render_height = width * scale, height * scale
-        hx, hy = (np.array(placed.heatmap_centre) - centre) * scale
-        image.position = (float(hx), float(hy), -0.01)
+        cells = self.nodes["vgm"]
+        cells.points, cells.colors = fit(placed.cells), placed.cell_rgb
+        cell_size = placed.resolution * scale
+        if not math.isclose(cells.point_size, cell_size, rel_tol=1e-3):
+            cells.point_size = cell_size
         self.nodes["previous"].points = fit(view.prev)
         self.nodes["current"].points = fit(placed.cur)
         segments, colours = pose_marks(placed.pose, view.reference)
@@ -183,14 +182,12 @@ class TabScene:
 
     def _make(self, view: EdgeView, placed: PlacedPair) -> None:
         scene = self.client.scene
-        self.nodes["vgm"] = scene.add_image(
+        self.nodes["vgm"] = scene.add_point_cloud(
             "/vgm",
-            placed.heatmap_rgb,
-            render_width=1.0,
-            render_height=1.0,
-            format="png",
-            cast_shadow=False,
-            receive_shadow=False,
+            placed.cells,
+            placed.cell_rgb,
+            point_size=placed.resolution,
+            point_shape="square",
         )
         self.nodes["previous"] = scene.add_point_cloud(
             "/scans/previous", view.prev, PREV_RGB, point_size=POINT_SIZE

@@ -30,6 +30,8 @@ class PlacedPair:
     pose: NDArray[np.float64]
     heatmap_rgb: NDArray[np.uint8]  # (h, w, 3) RGB, row i along +y: the occupied part of the VGM
     channels_rgb: NDArray[np.uint8]  # the panel's picture of both channels (heatmap.channels_panel)
+    cells: NDArray[np.float32]  # (K, 3) centres of the occupied cells, metres, z just below 0
+    cell_rgb: NDArray[np.uint8]  # (K, 3) their colours in the heatmap
     heatmap_centre: tuple[float, float]  # where the crop's centre lies, metres
     cur: NDArray[np.float32]  # (M, 3) current scan in the previous scan's frame
     resolution: float  # metres per heatmap pixel (the VGM's cell size)
@@ -80,14 +82,37 @@ def _placed(
     )
     (r0, r1, c0, c1), centre = _crop(vgm, params.resolution)
     crop = vgm[:, r0:r1, c0:c1]
+    rgb = blend(crop)  # row 0 at the grid's -y edge, as viser draws an image's first row
+    cells, cell_rgb = _cells(crop, rgb, centre, params.resolution)
     return PlacedPair(
         pose_arr,
-        blend(crop),  # row 0 at the grid's -y edge, as viser draws an image's first row
+        rgb,
         channels_panel(crop),
+        cells,
+        cell_rgb,
         centre,
         _xyz(se2.transform_points(pose_arr, cur)),
         params.resolution,
     )
+
+
+def _cells(
+    crop: NDArray[np.float32],
+    rgb: NDArray[np.uint8],
+    centre: tuple[float, float],
+    resolution: float,
+) -> tuple[NDArray[np.float32], NDArray[np.uint8]]:
+    """The occupied cells as points (centres, colours): drawn as squares one cell wide.
+
+    A software-rendering browser pays for every screen pixel a picture covers; the occupied
+    cells are a few percent of the crop, so squares cost a fraction of the picture.
+    """
+    rows, cols = np.nonzero((crop[0] > 0) | (crop[1] > 0))
+    h, w = crop.shape[1:]
+    out = np.full((len(rows), 3), -0.01, dtype=np.float32)
+    out[:, 0] = centre[0] + (cols + 0.5 - w / 2) * resolution
+    out[:, 1] = centre[1] + (rows + 0.5 - h / 2) * resolution
+    return out, np.ascontiguousarray(rgb[rows, cols])
 
 
 def _crop(
