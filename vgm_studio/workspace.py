@@ -48,6 +48,7 @@ def fill_workspace(
     max_loops: int = 2000,
     time_offset: float = 0.0,
     *,
+    time_tolerance: float = JoinOptions.time_tolerance,
     say: Say = _quiet,
     warn: Say = _quiet,
 ) -> int:
@@ -60,6 +61,7 @@ def fill_workspace(
         options: How to read the log.
         max_loops: Loop candidates at most.
         time_offset: Seconds added to a reference log's timestamps.
+        time_tolerance: Reference timestamps match within this many seconds.
         say: Told what is being made.
         warn: Told what went amiss in reading.
 
@@ -79,7 +81,7 @@ def fill_workspace(
         kind = "edges"
     else:
         found = read_source(
-            source, options, reference, JoinOptions(time_offset=time_offset), max_loops
+            source, options, reference, JoinOptions(time_tolerance, time_offset), max_loops
         )
         for line in found.warnings:
             warn(line)

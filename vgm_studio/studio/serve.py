@@ -11,6 +11,7 @@ from __future__ import annotations
 import sys
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,15 +19,20 @@ from pathlib import Path
 from vgm_studio.errors import InputError
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.studio.app import Studio, StudioConfig
+from vgm_studio.studio.gate import is_loopback
 from vgm_studio.studio.panel import trainer_text
 from vgm_studio.trainer import PromotionWatcher, TrainerSupervisor, request_training
 from vgm_studio.workspace import predict_workspace
 
 EXPOSED = (
-    "viser has no authentication: anyone who can reach {host}:{port} can read and change "
-    "these labels. Listen on 127.0.0.1 (the default) unless the network is trusted."
+    "anyone who can reach {host}:{port} and has the address above (its token) can read and "
+    "change these labels, over plain HTTP. Listen on 127.0.0.1 (the default) unless the "
+    "network is trusted."
 )
-KEYS = "  keys: S success · F failure · D skip · Z undo · Q previous · E next · G guess"
+KEYS = (
+    "  keys: S success · F failure · D skip · Z undo · Q previous · E next · G guess"
+    " · V points/VGM · R reset view"
+)
 
 
 @dataclass
@@ -120,7 +126,7 @@ def serve(
     when = f" (ready {ready_seconds:.1f} s after start)" if ready_seconds is not None else ""
     _say(f"VGM Studio: {store.count_edges()} edges at {studio.url}{when}")
     _say(KEYS)
-    if config.host not in ("127.0.0.1", "localhost", "::1"):
+    if not is_loopback(config.host):
         _warn("  warning: " + EXPOSED.format(host=config.host, port=config.port))
     _say("  Ctrl-C stops; every label is already saved.")
     try:
@@ -133,3 +139,12 @@ def serve(
             stop_trainer()
         studio.stop()
         store.close()
+
+
+def added_text(store: LabelStore, source: Path, before: int, added: int) -> str:
+    """What a source added to a workspace that had edges: counts by kind, or none."""
+    if not added:
+        return f"{source}: already in {store.workspace}; no edges added ({before} there)"
+    kinds = Counter(edge.kind for edge in store.edges()[before:])
+    which = ", ".join(f"{n} {kind}" for kind, n in sorted(kinds.items()))
+    return f"{source}: added {added} edges ({which}) to the {before} in {store.workspace}"

@@ -44,6 +44,26 @@ def _warn(line: str) -> None:
     typer.echo(line, err=True)
 
 
+def _version(value: bool) -> None:
+    if value:
+        from vgm_studio import __version__
+
+        typer.echo(f"{PROG} {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", help="Print the version and exit.", is_eager=True, callback=_version
+        ),
+    ] = False,
+) -> None:
+    """Label, validate and debug 2D LiDAR scan-matching edges with Validation Grid Maps."""
+
+
 @app.command()
 @with_read_options
 def info(
@@ -247,6 +267,7 @@ app.command("label")(studio_cmds.label)
 app.command("demo")(studio_cmds.demo)
 app.command("export")(studio_cmds.export)
 app.command("import")(studio_cmds.import_)
+app.command("agreement")(studio_cmds.agreement)
 app.command("slam")(slam_cmd.slam)
 app.command("fleet")(fleet_cmd.fleet)
 app.command("trainer")(trainer_cmds.trainer)

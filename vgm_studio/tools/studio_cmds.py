@@ -16,6 +16,9 @@ from vgm_studio.tools.options import (
     NoTrainerOpt,
     PortOpt,
     RetrainOpt,
+    TimeToleranceOpt,
+    TokenOpt,
+    WorkspaceOpt,
     number,
     with_read_options,
 )
@@ -54,6 +57,7 @@ def label(
     ] = None,
     port: PortOpt = 8080,
     host: HostOpt = "127.0.0.1",
+    token: TokenOpt = None,
     annotator: AnnotatorOpt = None,
     model: Annotated[
         Path | None,
@@ -77,22 +81,34 @@ def label(
     time_offset: Annotated[
         float, typer.Option(help="Seconds added to a reference log's timestamps.")
     ] = 0.0,
+    time_tolerance: TimeToleranceOpt = 0.05,
 ) -> None:
     """Serve a log's candidate edges (or an edges file) in the browser for labeling."""
     from vgm_studio.labels.store import LabelStore
     from vgm_studio.studio.app import StudioConfig, check_port_free, default_annotator
-    from vgm_studio.studio.serve import TrainerOptions, serve
+    from vgm_studio.studio.serve import TrainerOptions, added_text, serve
     from vgm_studio.workspace import choose_model, fill_workspace
 
     start = time.perf_counter()
     check_port_free(host, port)
     store = LabelStore(workspace or Path(f"{source.stem}.studio"))
-    fill_workspace(
-        store, source, reference, read, max_loops, time_offset, say=typer.echo, warn=_warn
+    before = store.count_edges()
+    added = fill_workspace(
+        store,
+        source,
+        reference,
+        read,
+        max_loops,
+        time_offset,
+        time_tolerance=time_tolerance,
+        say=typer.echo,
+        warn=_warn,
     )
+    if before:  # an existing workspace: say what this source changed in it
+        typer.echo(added_text(store, source, before, added))
     serve(
         store,
-        StudioConfig(host=host, port=port, annotator=annotator or default_annotator()),
+        StudioConfig(host=host, port=port, annotator=annotator or default_annotator(), token=token),
         model=choose_model(model, no_model, precision=loop_precision or None, warn=_warn),
         precision=loop_precision or None,
         trainer=None if no_trainer else TrainerOptions.checked(retrain_every, base),
@@ -104,6 +120,7 @@ def demo(
     workspace: DemoWorkspaceOpt = Path("vgm-demo"),
     port: PortOpt = 8080,
     host: HostOpt = "127.0.0.1",
+    token: TokenOpt = None,
     annotator: AnnotatorOpt = None,
     serve_app: Annotated[
         bool, typer.Option("--serve/--no-serve", help="Serve the studio (else prepare and exit).")
@@ -131,7 +148,7 @@ def demo(
         return
     serve(
         store,
-        StudioConfig(host=host, port=port, annotator=annotator or default_annotator()),
+        StudioConfig(host=host, port=port, annotator=annotator or default_annotator(), token=token),
         model=model,
         precision=precision,
         trainer=None if no_trainer else TrainerOptions.checked(retrain_every, None),
@@ -163,3 +180,19 @@ def import_(
     for path in files:
         edges, labels = import_labels(store, path)
         typer.echo(f"{path}: {labels} labels added or updated, {edges} new edges")
+
+
+def agreement(workspace: WorkspaceOpt) -> None:
+    """Cohen's kappa and the shared edges of every pair of annotators in a workspace."""
+    from vgm_studio.labels.agreement import agreement as pairs_of
+    from vgm_studio.labels.agreement import agreement_lines
+    from vgm_studio.labels.store import LabelStore
+
+    store = LabelStore(workspace, create=False)
+    pairs = pairs_of(store.label_map())
+    store.close()
+    if not pairs:
+        typer.echo(f"{workspace}: no edge has labels of two annotators yet")
+        return
+    for line in agreement_lines(pairs):
+        typer.echo(line)
