@@ -32,6 +32,24 @@ from vgm_studio.errors import InputError
 
 SKIPPED = frozenset({"PARAM", "SYNC"})
 _CORRECTED_NAME = re.compile(r"corrected|\.gfs\.", re.IGNORECASE)
+# A reading float32 cannot hold would be stored as inf and make the log's range inf.
+MAX_READING = float(np.finfo(np.float32).max)
+# Fields after the readings: two poses (6) then, optionally, ipc_timestamp host logger_timestamp.
+_FLASER_TAILS = (6, 9)
+# ROBOTLASER1 after the remissions: two poses, tv rv forward_safety side_safety turn_axis (11),
+# then optionally the three timestamp fields.
+_ROBOTLASER_TAILS = (11, 14)
+_QUOTE_CHARS = 12
+_UNSAFE = re.compile(r"[^\x21-\x7e]")
+
+
+def quote_token(token: str) -> str:
+    """A log token safe to print: at most a few printable ASCII characters, others as ``?``.
+
+    A message must not echo a hostile file: escape sequences, NUL or a secret read by mistake.
+    """
+    short = _UNSAFE.sub("?", token[:_QUOTE_CHARS])
+    return f"'{short}…'" if len(token) > _QUOTE_CHARS else f"'{short}'"
 
 
 def flaser_angles(num_beams: int, fov_deg: float = 180.0) -> tuple[float, float]:
@@ -83,29 +101,43 @@ class _LineParser:
         self.path, self.lineno, self.tokens = path, lineno, tokens
 
     def fail(self, message: str) -> InputError:
-        return InputError(self.path, f"{self.tokens[0]}: {message}", line=self.lineno)
+        kind = _UNSAFE.sub("?", self.tokens[0][:_QUOTE_CHARS])
+        return InputError(self.path, f"{kind}: {message}", line=self.lineno)
 
     def need(self, count: int, what: str) -> None:
         if len(self.tokens) < count:
             raise self.fail(f"expected at least {count} fields ({what}), found {len(self.tokens)}")
 
+    def exact(self, counts: tuple[int, ...], declared: str) -> None:
+        """The line must have one of ``counts`` fields: a wrong count shifts every later field."""
+        if len(self.tokens) not in counts:
+            expected = " or ".join(map(str, counts))
+            raise self.fail(
+                f"{declared}, so the line should have {expected} fields, but it has "
+                f"{len(self.tokens)}"
+            )
+
     def number(self, i: int) -> float:
         try:
             value = float(self.tokens[i])
         except (ValueError, IndexError):
-            raise self.fail(f"field {i} {self.tokens[i]!r} is not a number") from None
+            raise self.fail(f"field {i} {quote_token(self.tokens[i])} is not a number") from None
         if math.isnan(value):
             raise self.fail(f"field {i} is NaN")
         return value
 
-    def count(self, i: int) -> int:
-        try:
-            value = int(self.tokens[i])
-        except (ValueError, IndexError):
-            raise self.fail(f"field {i} {self.tokens[i]!r} is not a beam count") from None
-        if value < 0:
-            raise self.fail(f"negative beam count {value}")
+    def finite(self, i: int, what: str) -> float:
+        value = self.number(i)
+        if not math.isfinite(value):
+            raise self.fail(f"{what} (field {i}) must be a finite number, got {value}")
         return value
+
+    def count(self, i: int) -> int:
+        token = self.tokens[i]
+        # int() of a 5,000-digit token raises ValueError; a beam count has at most a few digits.
+        if len(token) > 9 or not token.isdigit():
+            raise self.fail(f"field {i} {quote_token(token)} is not a beam count")
+        return int(token)
 
     def numbers(self, start: int, stop: int) -> NDArray[np.float64]:
         try:
@@ -118,12 +150,12 @@ class _LineParser:
     def ranges(self, start: int, stop: int) -> NDArray[np.float32]:
         """The readings ``start:stop``; each must be a finite distance, ≥ 0."""
         values = self.numbers(start, stop)
-        bad = np.flatnonzero(~np.isfinite(values) | (values < 0))
+        bad = np.flatnonzero(~np.isfinite(values) | (values < 0) | (values > MAX_READING))
         if len(bad):
             k = int(bad[0])
             raise self.fail(
-                f"range {k + 1} (field {start + k}) is {self.tokens[start + k]!r}; "
-                "a reading must be a finite distance ≥ 0"
+                f"range {k + 1} (field {start + k}) is {quote_token(self.tokens[start + k])}; "
+                "a reading must be a finite distance ≥ 0 (that a float32 holds)"
                 + (f" ({len(bad)} such readings)" if len(bad) > 1 else "")
             )
         return values.astype(np.float32)
@@ -135,12 +167,13 @@ class _LineParser:
         return pose
 
     def timestamp(self, i: int) -> float:
-        return self.number(i) if i < len(self.tokens) else float("nan")
+        return self.finite(i, "timestamp") if i < len(self.tokens) else float("nan")
 
 
 def _parse_flaser(p: _LineParser) -> _RawScan:
     n = p.count(1)
     p.need(2 + n + 6, f"{n} ranges and two poses")
+    p.exact(tuple(2 + n + t for t in _FLASER_TAILS), f"it declares {n} readings")
     return _RawScan(
         line=p.lineno,
         timestamp=p.timestamp(2 + n + 6),
@@ -155,14 +188,20 @@ def _parse_flaser(p: _LineParser) -> _RawScan:
 
 def _parse_robotlaser(p: _LineParser) -> _RawScan:
     p.need(9, "laser configuration")
-    start, _fov, res, max_range = (p.number(i) for i in (2, 3, 4, 5))
-    if not (math.isfinite(max_range) and max_range > 0):
+    start, _fov, res, max_range = (
+        p.finite(i, what)
+        for i, what in ((2, "start angle"), (3, "field of view"), (4, "resolution"), (5, "range"))
+    )
+    if not max_range > 0:
         raise p.fail(f"maximum range (field 5) must be a positive distance, got {max_range}")
     n = p.count(8)
     p.need(9 + n + 1, f"{n} ranges and the remission count")
     m = p.count(9 + n)
     tail = 9 + n + 1 + m
     p.need(tail + 6, "laser and robot poses")
+    p.exact(
+        tuple(tail + t for t in _ROBOTLASER_TAILS), f"it declares {n} readings and {m} remissions"
+    )
     return _RawScan(
         line=p.lineno,
         timestamp=p.timestamp(tail + 11),
@@ -247,15 +286,17 @@ def read_carmen(path: str | Path, options: ReadOptions | None = None) -> ScanLog
                 last_odom = p.pose(1)
             elif kind == "TRUEPOS":
                 p.need(7, "true pose, odometry pose and timestamp")
-                truepos.append((p.number(7) if len(tokens) > 7 else math.nan, p.pose(1)))
+                truepos.append((p.timestamp(7), p.pose(1)))
             else:
-                ignored[kind] += 1
+                ignored[_UNSAFE.sub("?", kind[:_QUOTE_CHARS])] += 1
         except InputError:
             if not options.skip_bad_lines:
                 raise
             bad.append(lineno)
     if not raw:
-        found = ", ".join(f"{k} ×{v}" for k, v in counts.most_common(5)) or "nothing"
+        found = (
+            ", ".join(f"{quote_token(k)} ×{v}" for k, v in counts.most_common(5)) or "nothing"
+        )
         raise InputError(path, f"no {scan_type}/ROBOTLASER1 scans in this log (found {found})")
 
     source: PoseSource = (

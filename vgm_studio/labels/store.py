@@ -21,6 +21,7 @@ from typing import Any
 
 from vgm_studio import __version__
 from vgm_studio.errors import InputError
+from vgm_studio.labels.schema import aware
 from vgm_studio.matching.edges import Edge
 
 SCHEMA = 1
@@ -374,7 +375,8 @@ class LabelStore:
                 "SELECT label, note, labeled_at FROM labels WHERE edge_id = ? AND annotator = ?",
                 (record.edge_id, record.annotator),
             ).fetchone()
-            if row is not None and (row[2] >= record.labeled_at):
+            # As instants, not text: "13:00+05:00" is earlier than "12:00+00:00".
+            if row is not None and aware(row[2]) >= aware(record.labeled_at):
                 return False
             self._append(
                 record.edge_id,

@@ -50,7 +50,8 @@ def fill_workspace(
         How many edges were new.
     """
     from vgm_studio.matching.candidates import CandidateConfig, make_candidates
-    from vgm_studio.matching.edges import read_edges
+    from vgm_studio.matching.edge_scans import check_viewable
+    from vgm_studio.matching.edges import read_edge_rows
     from vgm_studio.matching.matcher import ScanMatcher
     from vgm_studio.tools.sources import read_source
 
@@ -61,7 +62,9 @@ def fill_workspace(
     if store.has_source(key):
         return 0
     if source.suffix.lower() == ".jsonl":
-        edges = read_edges(source)
+        rows = read_edge_rows(source)
+        check_viewable(rows, source)  # before the server starts, not as a blank tab
+        edges = [edge for _, edge in rows]
         kind = "edges"
     else:
         found = read_source(
