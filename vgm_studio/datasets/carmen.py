@@ -294,9 +294,7 @@ def read_carmen(path: str | Path, options: ReadOptions | None = None) -> ScanLog
                 raise
             bad.append(lineno)
     if not raw:
-        found = (
-            ", ".join(f"{quote_token(k)} ×{v}" for k, v in counts.most_common(5)) or "nothing"
-        )
+        found = ", ".join(f"{quote_token(k)} ×{v}" for k, v in counts.most_common(5)) or "nothing"
         raise InputError(path, f"no {scan_type}/ROBOTLASER1 scans in this log (found {found})")
 
     source: PoseSource = (

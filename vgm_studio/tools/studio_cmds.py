@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import errno
+import socket
 import threading
 import time
 from collections.abc import Callable
@@ -13,7 +15,7 @@ import typer
 
 from vgm_studio.datasets import ReadOptions
 from vgm_studio.datasets.carmen import file_hash
-from vgm_studio.errors import InputError
+from vgm_studio.errors import InputError, require_utf8_path
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.studio.app import Studio, StudioConfig, check_port_free, default_annotator
 
@@ -27,6 +29,28 @@ EXPOSED = (
     "viser has no authentication: anyone who can reach {host}:{port} can read and change "
     "these labels. Listen on 127.0.0.1 (the default) unless the network is trusted."
 )
+
+
+def check_host(host: str) -> None:
+    """Refuses a ``--host`` that is not a name or address of this machine, in those words.
+
+    Raises:
+        InputError: The name does not resolve, or no interface of this machine has it.
+    """
+    try:
+        family, kind, _, _, address = socket.getaddrinfo(host, 0, type=socket.SOCK_STREAM)[0]
+    except (socket.gaierror, UnicodeError):
+        raise InputError(f"--host {host}", "is not a name or address that resolves") from None
+    with socket.socket(family, kind) as probe:
+        try:
+            probe.bind(address)
+        except OSError as exc:
+            if exc.errno == errno.EADDRNOTAVAIL:
+                raise InputError(
+                    f"--host {host}",
+                    "is not an address of this machine; listen on 127.0.0.1 (this machine "
+                    "only), 0.0.0.0 (every interface) or one of this machine's addresses",
+                ) from None
 
 
 def _source_hash(source: Path) -> str:
@@ -55,6 +79,9 @@ def fill_workspace(
     from vgm_studio.matching.matcher import ScanMatcher
     from vgm_studio.tools.sources import read_source
 
+    for path in (source, reference):
+        if path is not None:
+            require_utf8_path(path)
     if not source.exists():
         raise InputError(source, "no such file or folder")
     sha = _source_hash(source)
@@ -243,6 +270,7 @@ def label(
     start = time.perf_counter()
     if poses not in ("auto", "odometry", "reference"):
         raise typer.BadParameter(f"{poses!r} is not one of auto, odometry, reference.")
+    check_host(host)
     check_port_free(host, port)
     store = LabelStore(workspace or Path(f"{source.stem}.studio"))
     options = ReadOptions(poses=cast(PoseSource, poses), skip_bad_lines=skip_bad_lines)
@@ -314,7 +342,8 @@ def demo(
             "vgm-studio simulate --out datasets --preset demo --seed 0",
         )
     if serve_app:
-        check_port_free(host, port)
+        check_host(host)
+    check_port_free(host, port)
     store = LabelStore(workspace)
     fill_workspace(store, DEMO_LOG, None, ReadOptions(), max_loops=DEMO_LOOPS)
     model = _model_path(None, False)
