@@ -9,15 +9,16 @@ from __future__ import annotations
 import os
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
 
 import torch
 
 from vgm_studio.errors import InputError
+from vgm_studio.model.checkpoint_schema import ModelName, parse_checkpoint_meta
 from vgm_studio.vgm.grid import VGMParams
 
 FORMAT = "vgm-studio-model/1"
-MODEL_NAMES = ("vgmnet", "vgmnet-paper", "rgb-baseline", "score")
+MODEL_NAMES: tuple[str, ...] = get_args(ModelName)
 
 
 def save_checkpoint(path: Path, payload: dict[str, Any]) -> None:
@@ -52,9 +53,7 @@ def load_checkpoint(path: Path, expect_vgm: VGMParams | None = None) -> dict[str
         raise InputError(path, f"not a readable model checkpoint ({type(exc).__name__})") from None
     if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
         raise InputError(path, f"not a VGM Studio model (expected format {FORMAT})")
-    if ckpt.get("model") not in MODEL_NAMES:
-        raise InputError(path, f"unknown model {ckpt.get('model')!r}")
-    vgm = VGMParams(**ckpt["vgm"])
+    vgm = VGMParams(**parse_checkpoint_meta(ckpt, path).vgm.model_dump())
     if expect_vgm is not None and vgm != expect_vgm:
         raise InputError(
             path,
