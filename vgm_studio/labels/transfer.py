@@ -19,7 +19,7 @@ from vgm_studio.errors import InputError
 from vgm_studio.labels.schema import escape_cell, parse_label_row, unescape_cell
 from vgm_studio.labels.store import LabelRecord, LabelStore
 from vgm_studio.matching.edge_scans import check_viewable
-from vgm_studio.matching.edge_schema import load_json_line
+from vgm_studio.matching.edge_schema import json_lines, load_json_line
 from vgm_studio.matching.edges import Edge
 
 FORMATS = (".jsonl", ".csv")
@@ -82,7 +82,9 @@ def export_labels(store: LabelStore, out: Path) -> int:
         text = "".join(json.dumps(r, separators=(",", ":")) + "\n" for r in rows)
     else:
         buffer = io.StringIO()
-        writer = csv.DictWriter(buffer, fieldnames=COLUMNS, lineterminator="\n")
+        # CRLF, as RFC 4180 and spreadsheets write it: the csv module then quotes a cell
+        # holding either character, so a note with a carriage return stays one cell.
+        writer = csv.DictWriter(buffer, fieldnames=COLUMNS, lineterminator="\r\n")
         writer.writeheader()
         for row in rows:
             writer.writerow(
@@ -113,8 +115,11 @@ def _read_text(path: Path, suffix: str) -> str:
     if not path.is_file():
         raise InputError(path, "no such file")
     try:
-        # Spreadsheets save CSV with a byte-order mark.
-        return path.read_text(encoding="utf-8-sig" if suffix == ".csv" else "utf-8")
+        # Spreadsheets save CSV with a byte-order mark. No newline translation: a carriage
+        # return inside a quoted cell is part of the cell.
+        encoding = "utf-8-sig" if suffix == ".csv" else "utf-8"
+        with path.open(encoding=encoding, newline="") as f:
+            return f.read()
     except UnicodeDecodeError as exc:
         raise InputError(path, f"not a text file ({exc.reason} at byte {exc.start})") from None
     except OSError as exc:
@@ -127,7 +132,7 @@ def _read_rows(path: Path) -> list[tuple[int, Any]]:
     if suffix == ".jsonl":
         return [
             (lineno, load_json_line(line, path, lineno))
-            for lineno, line in enumerate(text.splitlines(), start=1)
+            for lineno, line in enumerate(json_lines(text), start=1)
             if line.strip()
         ]
     return _read_csv(path, text)
@@ -136,15 +141,18 @@ def _read_rows(path: Path) -> list[tuple[int, Any]]:
 def _read_csv(path: Path, text: str) -> list[tuple[int, Any]]:
     reader = csv.DictReader(io.StringIO(text, newline=""))
     rows: list[tuple[int, Any]] = []
+    done = 0  # the last line of the last record read whole
     try:
         header = reader.fieldnames or []
         missing = [c for c in ("edge_id", "annotator", "label", "labeled_at") if c not in header]
         if missing:
             raise InputError(path, f"CSV header lacks {', '.join(missing)}", line=1)
+        done = reader.line_num
         for row in reader:
-            rows.append((reader.line_num, _csv_row(path, reader.line_num, row)))
+            rows.append((done + 1, _csv_row(path, done + 1, row)))
+            done = reader.line_num
     except csv.Error as exc:  # e.g. a cell over csv.field_size_limit() characters
-        raise InputError(path, f"not CSV we read ({exc})", line=reader.line_num) from None
+        raise InputError(path, f"not CSV we read ({exc})", line=done + 1) from None
     return rows
 
 

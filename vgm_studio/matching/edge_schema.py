@@ -156,6 +156,15 @@ def _refuse_constant(name: str) -> Any:
     raise ValueError(f"{name} is not a JSON number")
 
 
+def json_lines(text: str) -> list[str]:
+    """The lines of a JSONL text, split at ``\\n`` only.
+
+    ``str.splitlines`` also splits at characters JSON strings may hold raw (U+2028, U+0085,
+    form feed), which would cut one record in two.
+    """
+    return [line.removesuffix("\r") for line in text.split("\n")]
+
+
 def load_json_line(text: str, path: Path | str | None, line: int | None) -> Any:
     """Parses one line of untrusted JSON.
 

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from vgm_studio.errors import InputError
-from vgm_studio.matching.edge_schema import load_json_line, parse_edge_row
+from vgm_studio.matching.edge_schema import json_lines, load_json_line, parse_edge_row
 
 EdgeKind = Literal["sequential", "loop"]
 Label = Literal["success", "failure", "ambiguous"]
@@ -150,7 +150,7 @@ def read_edge_rows(path: str | Path) -> list[tuple[int, Edge]]:
     if not path.is_file():
         raise InputError(path, "no such file")
     try:
-        lines = path.read_text(encoding="utf-8").splitlines()
+        lines = json_lines(path.read_bytes().decode("utf-8"))
     except UnicodeDecodeError as exc:
         raise InputError(
             path, f"not a text edges file ({exc.reason} at byte {exc.start})"
