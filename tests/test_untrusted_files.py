@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 
@@ -75,14 +76,12 @@ def test_an_export_round_trips_and_its_csv_runs_no_formula(tmp_path):
     log = write_log(tmp_path)
     store = LabelStore(tmp_path / "ws")
     store.add_edges(make_edges(log))
-    notes = ["=HYPERLINK(\"http://x\",\"y\")", "+1", "-2+3", "@SUM(A1)", "\tx", "\rx", "'q", "ok"]
+    notes = ['=HYPERLINK("http://x","y")', "+1", "-2+3", "@SUM(A1)", "\tx", "\rx", "'q", "ok"]
     ids = store.edge_ids()
     for i, note in enumerate(notes):
         store.label(ids[i % len(ids)], f"=ann{i}", "success", note=note)
     out = tmp_path / "labels.csv"
     export_labels(store, out)
-    import csv
-
     with out.open(newline="") as f:
         cells = [c for row in csv.reader(f) for c in row]
     assert not any(c.startswith(("=", "+", "-", "@", "\t", "\r")) for c in cells)
@@ -103,8 +102,6 @@ def _csv_with(tmp_path, column: str, value: str):
     store.label(store.edge_ids()[0], "ana", "success")
     out = tmp_path / "labels.csv"
     export_labels(store, out)
-    import csv
-
     rows = list(csv.DictReader(out.open(newline="")))
     rows[0][column] = value
     with out.open("w", newline="") as f:

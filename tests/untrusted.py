@@ -54,9 +54,7 @@ def label_row(edge: Edge, **kw: Any) -> dict[str, Any]:
     """An exported label row of ``edge`` (the JSONL schema of ``vgm-studio export``)."""
     row = edge.to_json()
     row["reference_label"] = row.pop("label")
-    row.update(
-        label="success", annotator="ana", labeled_at="2026-01-01T12:00:00+00:00", note=""
-    )
+    row.update(label="success", annotator="ana", labeled_at="2026-01-01T12:00:00+00:00", note="")
     row.update(kw)
     return row
 

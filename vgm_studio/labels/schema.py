@@ -8,7 +8,6 @@ injection) and read back without it, so export → import gives back the same te
 
 from __future__ import annotations
 
-import unicodedata
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -16,7 +15,7 @@ from typing import Annotated, Any, Literal
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
 from vgm_studio.errors import InputError
-from vgm_studio.matching.edge_schema import MAX_TEXT_CHARS, Text, describe
+from vgm_studio.matching.edge_schema import MAX_TEXT_CHARS, Name, Text, describe
 from vgm_studio.matching.edges import Edge
 
 MAX_NOTE_CHARS = 4000
@@ -28,8 +27,6 @@ FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r", "'")
 def _annotator(value: str) -> str:
     if not value.strip():
         raise ValueError("is empty (is this an exported label file?)")
-    if any(unicodedata.category(c).startswith("C") for c in value):
-        raise ValueError("holds control characters")
     return value
 
 
@@ -49,7 +46,7 @@ class LabelFields(BaseModel):
     model_config = ConfigDict(extra="ignore")
 
     annotator: Annotated[
-        Text, Field(min_length=1, max_length=MAX_TEXT_CHARS), AfterValidator(_annotator)
+        Name, Field(min_length=1, max_length=MAX_TEXT_CHARS), AfterValidator(_annotator)
     ]
     label: Literal["success", "failure"]
     labeled_at: Annotated[str, Field(max_length=64), AfterValidator(_aware_time)]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import unicodedata
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -48,6 +49,13 @@ def _utf8(value: str) -> str:
     return value
 
 
+def _printable(value: str) -> str:
+    """Refuses control characters in a name that messages quote (escape sequences, NUL)."""
+    if any(unicodedata.category(c) in ("Cc", "Cf", "Cs", "Co", "Cn") for c in value):
+        raise ValueError("holds control characters")
+    return value
+
+
 def _finite(value: float) -> float:
     if not math.isfinite(value):
         raise ValueError("must be a finite number")
@@ -68,7 +76,14 @@ def _pose(value: list[float]) -> list[float]:
 
 
 Text = Annotated[str, Field(max_length=MAX_TEXT_CHARS), AfterValidator(_utf8)]
-PathText = Annotated[str, Field(min_length=1, max_length=MAX_PATH_CHARS), AfterValidator(_utf8)]
+# Names appear in messages and file paths: no control characters at all.
+Name = Annotated[Text, AfterValidator(_printable)]
+PathText = Annotated[
+    str,
+    Field(min_length=1, max_length=MAX_PATH_CHARS),
+    AfterValidator(_utf8),
+    AfterValidator(_printable),
+]
 Finite = Annotated[float, AfterValidator(_finite)]
 Pose = Annotated[list[float], AfterValidator(_pose)]
 ScanIndex = Annotated[int, Field(ge=0, le=MAX_SCAN_INDEX)]
@@ -106,8 +121,8 @@ class ReadParams(BaseModel):
     max_range: Annotated[Finite, Field(gt=0.0)] | None = None
     laser: Literal["front", "rear"] = "front"
     skip_bad_lines: StrictBool = False
-    scan_topic: Text | None = None
-    odom_topic: Text | None = None
+    scan_topic: Name | None = None
+    odom_topic: Name | None = None
 
 
 class EdgeParams(BaseModel):
@@ -123,7 +138,7 @@ class EdgeRow(BaseModel):
 
     model_config = ConfigDict(extra="ignore")
 
-    edge_id: Annotated[Text, Field(min_length=1, max_length=128)]
+    edge_id: Annotated[Name, Field(min_length=1, max_length=128)]
     log_path: PathText
     log_sha256: Annotated[str, Field(max_length=MAX_TEXT_CHARS, pattern=r"^[0-9a-fA-F-]*$")] = ""
     a: ScanIndex
