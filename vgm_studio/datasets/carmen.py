@@ -40,6 +40,7 @@ _FLASER_TAILS = (6, 9)
 # then optionally the three timestamp fields.
 _ROBOTLASER_TAILS = (11, 14)
 _QUOTE_CHARS = 12
+_MESSAGE_NAME = re.compile(r"[A-Z][A-Z0-9_]{0,23}")
 _UNSAFE = re.compile(r"[^\x21-\x7e]")
 
 
@@ -118,9 +119,10 @@ class _LineParser:
             )
 
     def number(self, i: int) -> float:
+        self.need(i + 1, f"field {i}")
         try:
             value = float(self.tokens[i])
-        except (ValueError, IndexError):
+        except ValueError:
             raise self.fail(f"field {i} {quote_token(self.tokens[i])} is not a number") from None
         if math.isnan(value):
             raise self.fail(f"field {i} is NaN")
@@ -133,6 +135,7 @@ class _LineParser:
         return value
 
     def count(self, i: int) -> int:
+        self.need(i + 1, f"the count in field {i}")
         token = self.tokens[i]
         # int() of a 5,000-digit token raises ValueError; a beam count has at most a few digits.
         if len(token) > 9 or not token.isdigit():
@@ -214,6 +217,19 @@ def _parse_robotlaser(p: _LineParser) -> _RawScan:
     )
 
 
+def _found_messages(counts: Counter[str]) -> str:
+    """What a log without scans holds, naming only what looks like a CARMEN message type.
+
+    A file that is not a log at all (a path typed wrong, a secret) is not quoted back.
+    """
+    named = [(k, v) for k, v in counts.most_common() if _MESSAGE_NAME.fullmatch(k)]
+    other = sum(counts.values()) - sum(v for _, v in named)
+    parts = [f"{k} ×{v}" for k, v in named[:5]] + (
+        [f"{other} other line{'s' if other > 1 else ''}"] if other else []
+    )
+    return ", ".join(parts) or "nothing"
+
+
 def _guess_pose_source(path: Path, counts: Counter[str]) -> PoseSource:
     if counts.get("TRUEPOS"):
         return "odometry"
@@ -288,13 +304,13 @@ def read_carmen(path: str | Path, options: ReadOptions | None = None) -> ScanLog
                 p.need(7, "true pose, odometry pose and timestamp")
                 truepos.append((p.timestamp(7), p.pose(1)))
             else:
-                ignored[_UNSAFE.sub("?", kind[:_QUOTE_CHARS])] += 1
+                ignored[kind if _MESSAGE_NAME.fullmatch(kind) else "(not a message)"] += 1
         except InputError:
             if not options.skip_bad_lines:
                 raise
             bad.append(lineno)
     if not raw:
-        found = ", ".join(f"{quote_token(k)} ×{v}" for k, v in counts.most_common(5)) or "nothing"
+        found = _found_messages(counts)
         raise InputError(path, f"no {scan_type}/ROBOTLASER1 scans in this log (found {found})")
 
     source: PoseSource = (

@@ -78,6 +78,12 @@ def check_viewable(rows: Sequence[tuple[int, Edge]], source: Path) -> None:
     """
     scans = EdgeScans()
     for line, edge in rows:
+        if not edge.log_sha256:
+            raise InputError(
+                source,
+                "log_sha256: missing; the studio reads only a log whose content it can check",
+                line,
+            )
         try:
             log = scans.log_for(edge)
         except InputError as exc:
