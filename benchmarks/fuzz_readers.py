@@ -140,9 +140,8 @@ def _cli(seeds: dict[str, Path], count: int, rng: random.Random) -> list[str]:
         command, kind = commands[i % len(commands)]
         path = folder / f"cli-{i}{seeds[kind].suffix}"
         path.write_bytes(_mutant(seeds, kind, rng))
-        args = [str(path)] + (
-            ["--workspace", str(folder / f"ws-{i}")] if command == "import" else []
-        )
+        extra = ["--workspace", str(folder / f"ws-{i}")] if command == "import" else ["--json"]
+        args = [str(path), *extra]
         proc = subprocess.run(
             [sys.executable, "-m", "vgm_studio.tools.cmd", command, *args],
             capture_output=True,
@@ -153,6 +152,7 @@ def _cli(seeds: dict[str, Path], count: int, rng: random.Random) -> list[str]:
             proc.returncode in (0, 1)
             and "Traceback" not in proc.stderr
             and len(proc.stderr.strip().splitlines()) <= 1
+            and (command != "info" or proc.returncode != 0 or _standard_json(proc.stdout))
         )
         outcomes["ok" if proc.returncode == 0 and clean else "refused" if clean else "bad"] += 1
         if not clean:
@@ -165,6 +165,19 @@ def _cli(seeds: dict[str, Path], count: int, rng: random.Random) -> list[str]:
         str(outcomes["bad"]),
         "",
     ]
+
+
+def _standard_json(text: str) -> bool:
+    """True when ``text`` is JSON without the NaN/Infinity tokens Python's json allows."""
+
+    def refuse(name: str) -> None:
+        raise ValueError(name)
+
+    try:
+        json.loads(text, parse_constant=refuse)
+    except ValueError:
+        return False
+    return True
 
 
 def main() -> None:

@@ -151,6 +151,7 @@ def test_import_csv(seeds, target, ops):
 CLI_SAMPLE = [
     ("info", "log", [("replace", 0.3, 5)]),  # 1e999 in a reading
     ("info", "log", [("insert", 0.5, 14)]),  # an escape sequence
+    ("info", "log", [("duplicate", 0.5, 0)]),  # a valid log: its JSON must be standard
     ("info", "relations", [("replace", 0.2, 2)]),  # NaN pose
     ("import", "labels.jsonl", [("insert", 0.4, 11)]),  # 200,000 brackets
     ("import", "labels.jsonl", [("replace", 0.1, 12)]),  # 5,000 digits
@@ -174,10 +175,16 @@ def test_the_command_line_on_a_sample(seeds, tmp_path, command, kind, ops):
     elif command == "label":
         proc = run("label", path, "--workspace", workspace, "--port", free_port(), "--no-model")
     else:
-        proc = run(command, path)
+        proc = run(command, path, "--json")
     assert proc.returncode in (0, 1), proc.stderr
     assert "Traceback" not in proc.stderr and len(proc.stderr.strip().splitlines()) <= 1
     if command == "import" and proc.returncode == 1:
         assert store_rows(workspace / "labels.sqlite") == before
     if command == "label":
         assert proc.returncode == 1  # refused before a server ever starts
+    if command == "info" and proc.returncode == 0:
+        json.loads(proc.stdout, parse_constant=_refuse)  # standard JSON: no NaN or Infinity
+
+
+def _refuse(name: str) -> None:
+    raise AssertionError(f"info --json printed {name}")

@@ -219,6 +219,7 @@ def _flaser(ranges: str, t: str = "5", pose: str = "0 0 0 0 0 0") -> str:
         (_flaser("1 4e38 1"), "range 2 (field 3) is '4e38'"),
         ("FLASER " + "9" * 5000 + " 1", "is not a beam count"),
         ("FLASER", "expected at least 2 fields (the count in field 1), found 1"),
+        (_flaser("1 1 1", pose="1e300 0 0 0 0 0"), "pose (fields 5..6) is over 1e+07 m"),
     ],
 )
 def test_carmen_lines_that_disagree_or_overflow_are_refused(tmp_path, line, expected):

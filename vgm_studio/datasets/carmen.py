@@ -36,6 +36,9 @@ _CORRECTED_NAME = re.compile(r"corrected|\.gfs\.", re.IGNORECASE)
 MAX_READING = float(np.finfo(np.float32).max)
 # Fields after the readings: two poses (6) then, optionally, ipc_timestamp host logger_timestamp.
 _FLASER_TAILS = (6, 9)
+# Poses are metres in a local frame; even UTM northings stay below 1e7 m. Beyond that,
+# distances between poses overflow to inf.
+MAX_COORDINATE = 1e7
 # ROBOTLASER1 after the remissions: two poses, tv rv forward_safety side_safety turn_axis (11),
 # then optionally the three timestamp fields.
 _ROBOTLASER_TAILS = (11, 14)
@@ -167,6 +170,10 @@ class _LineParser:
         pose = np.array([self.number(start + k) for k in range(3)])
         if not np.all(np.isfinite(pose)):
             raise self.fail(f"pose (fields {start}..{start + 2}) is not finite")
+        if np.max(np.abs(pose[:2])) > MAX_COORDINATE:
+            raise self.fail(
+                f"pose (fields {start}..{start + 1}) is over {MAX_COORDINATE:g} m from the origin"
+            )
         return pose
 
     def timestamp(self, i: int) -> float:
