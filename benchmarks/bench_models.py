@@ -79,7 +79,7 @@ def main() -> None:
         t = time.perf_counter()
         v.predict_samples(timed, batch_size=64)
         per_pair = (time.perf_counter() - t) / len(timed)
-        trained = v.checkpoint["training"]
+        trained = v.checkpoint.training
         counts = trained["counts"]["train"]
         subset_note = "" if trained["config"].get("max_train") is None else " (subset)"
         rows.append(
@@ -94,7 +94,7 @@ def main() -> None:
                 f"{1e3 * per_pair:.2f}",
                 f"{1 / per_pair:.0f}",
                 f"{counts['success'] + counts['failure']}{subset_note}",
-                f"{trained['seconds'] / 60:.1f} ({v.checkpoint.get('device', '?')})",
+                f"{trained['seconds'] / 60:.1f} ({v.checkpoint.device})",
             ]
         )
         if name in PAPER_FIGURES:

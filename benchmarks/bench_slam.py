@@ -24,10 +24,12 @@ from pathlib import Path
 
 from _common import REPO, datasets_dir, machine, pin_to_cores, table
 
+from vgm_studio.slam.config import VALIDATORS as SLAM_VALIDATORS
+
 OUT = REPO / "build" / "slam"
 MODELS = REPO / "build" / "models"
 GFS_OFFSET = "976052857.33753"  # intel.gfs.log counts from the start of intel.clf
-VALIDATORS = ("none", "vgmnet", "rgb-baseline", "score", "reference")
+VALIDATORS = SLAM_VALIDATORS  # every validator the run knows, from the model registry
 TARGET_M, TARGET_S = 0.05, 300.0
 
 # Runs the command in a fresh process; registers it on the CLI if the app does not yet.

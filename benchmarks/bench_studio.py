@@ -24,9 +24,9 @@ import time
 from pathlib import Path
 
 from _common import REPO, datasets_dir, machine, table
+from studio_browser import StudioPage, chromium, free_port, studio_process
 
 from vgm_studio.labels import LabelStore
-from vgm_studio.studio.browser import StudioPage, chromium, free_port, studio_process
 from vgm_studio.trainer import trainer_status
 
 

@@ -157,11 +157,12 @@ class Run:
 
 
 def run_order(order: str, edges: Path, work: Path, args: argparse.Namespace) -> Run:
+    from studio_browser import StudioPage, chromium, free_port
+
     from vgm_studio.datasets import ReadOptions
     from vgm_studio.labels import LabelStore
-    from vgm_studio.studio.browser import StudioPage, chromium, free_port
-    from vgm_studio.tools.studio_cmds import fill_workspace
     from vgm_studio.trainer import registry
+    from vgm_studio.workspace import fill_workspace
 
     ws = work / f"ws-{order}"
     store = LabelStore(ws)

@@ -18,8 +18,8 @@ from vgm_studio.matching.candidates import (
     make_candidates,
     select_keyframes,
 )
-from vgm_studio.matching.labels import reference_label
 from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.matching.reference_labels import reference_label
 
 DEMO = Path(__file__).resolve().parents[1] / "datasets" / "demo-seed0.log"
 

@@ -9,7 +9,7 @@ import pytest
 
 from vgm_studio.errors import InputError
 from vgm_studio.matching.edges import Edge, edge_id, read_edges, write_edges
-from vgm_studio.matching.labels import LabelThresholds, reference_label
+from vgm_studio.matching.reference_labels import LabelThresholds, reference_label
 
 
 def make_edge(**kw) -> Edge:

@@ -156,8 +156,8 @@ def test_tiny_model_beats_chance_on_held_out_log(sim_edges, tmp_path):
         hyper={"figures": False},
     )
     out = tmp_path / "tiny.pt"
-    payload = train(data, config, out, progress=False, log=lambda _: None)
-    assert out.is_file() and len(payload["training"]["config"]) > 5
+    checkpoint = train(data, config, out, progress=False, log=lambda _: None)
+    assert out.is_file() and len(checkpoint.training["config"]) > 5
     validator = Validator.load(out)
     probs = validator.predict_samples(held.samples)
     m = binary_metrics(held.labels, probs, validator.threshold)
@@ -170,12 +170,12 @@ def test_tiny_model_beats_chance_on_held_out_log(sim_edges, tmp_path):
 def test_checkpoint_round_trip_and_refusals(sim_edges, tmp_path):
     data = read_labelled([sim_edges[0]], progress=False)
     out = tmp_path / "score.pt"
-    payload = train(data, TrainConfig(model="score"), out, progress=False, log=lambda _: None)
-    assert payload["training"]["files"][0]["sha256"]
-    assert payload["training"]["counts"]["train"]["failure"] > 0
+    checkpoint = train(data, TrainConfig(model="score"), out, progress=False, log=lambda _: None)
+    assert checkpoint.training["files"][0]["sha256"]
+    assert checkpoint.training["counts"]["train"]["failure"] > 0
     v = Validator.load(out, expect_vgm=VGMParams())
     assert v.name == "score" and v.vgm == VGMParams()
-    assert v.metrics["n"] == sum(payload["training"]["counts"]["validation"].values())
+    assert v.metrics["n"] == sum(checkpoint.training["counts"]["validation"].values())
     again = Validator.load(out)
     np.testing.assert_array_equal(
         v.predict_samples(data.samples[:20]), again.predict_samples(data.samples[:20])
@@ -271,7 +271,7 @@ def test_train_and_eval_commands(sim_edges, tmp_path):
 @pytest.mark.parametrize(("occupancy", "spread"), [(False, False), (True, True)])
 def test_prefolded_lifted_input_matches_network_on_raw_vgms(occupancy, spread):
     from vgm_studio.model.features import figures_matrix
-    from vgm_studio.model.networks import build_network
+    from vgm_studio.model.registry import build_network
     from vgm_studio.model.validator import input_spec
 
     torch.manual_seed(0)

@@ -19,8 +19,9 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
+from vgm_studio.core.hashing import content_hash
 from vgm_studio.datasets import ReadOptions, open_log
-from vgm_studio.datasets.rosbag import bag_hash, read_rosbag
+from vgm_studio.datasets.rosbag import read_rosbag
 from vgm_studio.datasets.scans import MIN_VALID_RANGE
 from vgm_studio.errors import InputError
 
@@ -274,12 +275,14 @@ def test_folder_hash_covers_names_and_contents(tmp_path: Path) -> None:
             (path / file).write_bytes(data)
         return path
 
-    base = bag_hash(folder("a", {"a.db3": b"xy", "metadata.yaml": b"z"}))
-    assert bag_hash(folder("b", {"a.db3": b"xy", "metadata.yaml": b"z"})) == base
-    assert bag_hash(folder("c", {"b.db3": b"xy", "metadata.yaml": b"z"})) != base  # renamed
-    assert bag_hash(folder("d", {"a.db3": b"x", "metadata.yaml": b"yz"})) != base  # moved byte
+    base = content_hash(folder("a", {"a.db3": b"xy", "metadata.yaml": b"z"}))
+    assert content_hash(folder("b", {"a.db3": b"xy", "metadata.yaml": b"z"})) == base
+    assert content_hash(folder("c", {"b.db3": b"xy", "metadata.yaml": b"z"})) != base  # renamed
+    assert content_hash(folder("d", {"a.db3": b"x", "metadata.yaml": b"yz"})) != base  # moved byte
     # Names and bytes run together alike unless sizes separate them.
-    assert bag_hash(folder("e", {"a": b"b\0c"})) != bag_hash(folder("f", {"a": b"", "b": b"c"}))
+    assert content_hash(folder("e", {"a": b"b\0c"})) != content_hash(
+        folder("f", {"a": b"", "b": b"c"})
+    )
 
 
 def test_open_log_dispatches_bags(tmp_path: Path) -> None:

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
+from benchmarks.studio_browser import StudioPage, chromium, chromium_path, free_port, studio_process
 from vgm_studio.labels import LabelStore
 from vgm_studio.matching.edges import read_edges
-from vgm_studio.studio.browser import StudioPage, chromium, chromium_path, free_port, studio_process
 
 pytestmark = pytest.mark.slow
 

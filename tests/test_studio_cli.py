@@ -7,10 +7,10 @@ import sqlite3
 
 import pytest
 
+from benchmarks.studio_browser import free_port
 from tests.test_cli_checks import one_line_error, run
 from vgm_studio.labels import LabelStore
 from vgm_studio.matching.edges import read_edges
-from vgm_studio.studio.browser import free_port
 
 
 def test_port_in_use_is_refused_before_serving(office_edges, tmp_path):

@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from vgm_studio.datasets.carmen import file_hash
+from vgm_studio.core.hashing import content_hash
 from vgm_studio.matching.edges import Edge, edge_id
 
 SCANS = 6
@@ -25,7 +25,7 @@ def write_log(folder: Path, name: str = "tiny.log") -> Path:
 
 def make_edges(log: Path, count: int = 3) -> list[Edge]:
     """Edges between consecutive scans of ``log``, as ``candidates`` would write them."""
-    sha = file_hash(log)
+    sha = content_hash(log)
     edges = []
     for a in range(count):
         estimate = [0.1, 0.0, 0.01 * a]

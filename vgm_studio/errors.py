@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+from collections.abc import Callable
 from pathlib import Path
 
 
@@ -38,3 +40,22 @@ def require_utf8_path(path: str | Path) -> None:
     except UnicodeEncodeError:
         shown = text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
         raise InputError(shown, "the path is not UTF-8 text; rename it") from None
+
+
+def exit_on_error(prog: str, body: Callable[[], object]) -> None:
+    """Runs a process's body; an expected error ends it with one line and an exit code.
+
+    The one place where errors become exit codes, for ``vgm-studio`` and for the trainer's
+    process alike: ``InputError`` exits 1 (``prog: error: file:line: what``), Ctrl-C 130, a
+    reader that closed the pipe 0. Anything else is a bug and keeps its traceback.
+    """
+    try:
+        body()
+    except InputError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        sys.exit(1)
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        sys.exit(130)
+    except BrokenPipeError:
+        sys.exit(0)

@@ -15,7 +15,6 @@ Comments (``#``), ``PARAM`` and ``SYNC`` are skipped; other message types (``NEF
 
 from __future__ import annotations
 
-import hashlib
 import math
 import re
 from collections import Counter
@@ -26,6 +25,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from vgm_studio.core.hashing import content_hash
 from vgm_studio.datasets.options import ReadOptions
 from vgm_studio.datasets.scans import PoseSource, Scan, ScanLog
 from vgm_studio.errors import InputError
@@ -75,15 +75,6 @@ def flaser_angles(num_beams: int, fov_deg: float = 180.0) -> tuple[float, float]
     fov = math.radians(fov_deg)
     steps = num_beams - 1 if num_beams % 2 == 1 else num_beams
     return -fov / 2.0, fov / max(steps, 1)
-
-
-def file_hash(path: Path) -> str:
-    """sha256 of a file's bytes, hex."""
-    h = hashlib.sha256()
-    with path.open("rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 @dataclass
@@ -369,7 +360,7 @@ def read_carmen(path: str | Path, options: ReadOptions | None = None) -> ScanLog
         path=path,
         format="carmen",
         scans=scans,
-        content_hash=file_hash(path),
+        content_hash=content_hash(path),
         pose_source=source,
         reference_origin=(
             "TRUEPOS"

@@ -28,7 +28,6 @@ those, readings below ``MIN_VALID_RANGE`` and readings at or beyond ``max_range`
 
 from __future__ import annotations
 
-import hashlib
 import importlib
 import math
 import sqlite3
@@ -50,8 +49,8 @@ from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, TypesysError, get_typestore
 from tqdm import tqdm
 
+from vgm_studio.core.hashing import content_hash
 from vgm_studio.core.se2 import wrap_angle
-from vgm_studio.datasets.carmen import file_hash
 from vgm_studio.datasets.options import ReadOptions
 from vgm_studio.datasets.scans import Scan, ScanLog
 from vgm_studio.errors import InputError
@@ -101,25 +100,6 @@ _BAG_ERRORS: tuple[type[Exception], ...] = (
     *_optional_error("backports.zstd", "ZstdError"),
     *_optional_error("zstandard", "ZstdError"),
 )
-
-
-def bag_hash(path: Path) -> str:
-    """sha256 of a bag, hex: of the file's bytes, or for a folder of its files sorted by name.
-
-    For a folder each file contributes its name (relative, ``/``-separated), its size and its
-    bytes, so renaming or moving content between files changes the hash.
-    """
-    if not path.is_dir():
-        return file_hash(path)
-    h = hashlib.sha256()
-    files = sorted((p for p in path.rglob("*") if p.is_file()), key=lambda p: p.relative_to(path))
-    for file in files:
-        h.update(file.relative_to(path).as_posix().encode("utf-8") + b"\0")
-        h.update(file.stat().st_size.to_bytes(8, "little"))
-        with file.open("rb") as f:
-            while block := f.read(1 << 20):
-                h.update(block)
-    return h.hexdigest()
 
 
 def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
@@ -364,7 +344,7 @@ def read_rosbag(path: str | Path, options: ReadOptions | None = None) -> ScanLog
         path=path,
         format="rosbag1" if is_ros1 else "rosbag2",
         scans=scans,
-        content_hash=bag_hash(path),
+        content_hash=content_hash(path),
         pose_source="odometry" if any(s.odometry is not None for s in scans) else None,
         ignored_messages=ignored,
         message_counts=dict(counts),

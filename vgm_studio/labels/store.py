@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from vgm_studio import __version__
+from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.errors import InputError
 from vgm_studio.labels.check import check_workspace, check_writable
 from vgm_studio.labels.schema import aware
@@ -437,7 +438,7 @@ class LabelStore:
     # -- predictions -------------------------------------------------------------------
 
     def set_predictions(
-        self, model: str, probabilities: dict[str, float], threshold: float = 0.5
+        self, model: str, probabilities: dict[str, float], threshold: float = DEFAULT_THRESHOLD
     ) -> None:
         """Stores a model's p(success) per edge and makes it the active model.
 
@@ -466,6 +467,8 @@ class LabelStore:
         )
         model = meta.get("active_model")
         if model is None:
-            return Predictions(None, 0.5, {})
+            return Predictions(None, DEFAULT_THRESHOLD, {})
         rows = self._query("SELECT edge_id, p FROM predictions WHERE model = ?", (model,))
-        return Predictions(model, float(meta.get("active_threshold", 0.5)), dict(rows))
+        return Predictions(
+            model, float(meta.get("active_threshold", DEFAULT_THRESHOLD)), dict(rows)
+        )

@@ -22,9 +22,9 @@ from vgm_studio.core import se2
 from vgm_studio.datasets.relations import MatchedRelation
 from vgm_studio.datasets.scans import ScanLog
 from vgm_studio.matching.edges import Edge, EdgeKind, edge_id
-from vgm_studio.matching.labels import LabelThresholds, reference_label
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.matching.odometry import lidar_odometry
+from vgm_studio.matching.reference_labels import LabelThresholds, reference_label
 
 
 @dataclass(frozen=True)

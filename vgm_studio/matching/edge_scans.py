@@ -5,8 +5,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+from vgm_studio.core.hashing import content_hash
 from vgm_studio.datasets import ReadOptions, Scan, ScanLog, open_log
-from vgm_studio.datasets.rosbag import bag_hash
 from vgm_studio.errors import InputError
 from vgm_studio.matching.edges import Edge
 
@@ -32,7 +32,7 @@ class EdgeScans:
                 ) from None
             # Hash before parsing: a path in an edges file must not make us read, and then
             # quote in an error, a file that is not the log the edge was made from.
-            if edge.log_sha256 and bag_hash(path) != edge.log_sha256:
+            if edge.log_sha256 and content_hash(path) != edge.log_sha256:
                 raise InputError(
                     path,
                     f"content differs from the log edge {edge.edge_id} was "

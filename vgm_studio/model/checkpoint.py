@@ -1,33 +1,95 @@
 """Model checkpoints: weights plus everything needed to trust them later.
 
 A checkpoint records the model name and hyper-parameters, the VGM parameters it was trained
-on, the training files (paths, hashes, edge counts) and its validation metrics.
+on, the p(success) cut chosen on validation, the training files (paths, hashes, edge counts)
+and its validation metrics. On disk it is a ``torch.save``d dict (``vgm-studio-model/1``);
+files written before ``Checkpoint`` existed read the same.
 """
 
 from __future__ import annotations
 
 import os
 import tempfile
+from dataclasses import asdict, dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, get_args
+from typing import Any
 
 import torch
 
+from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.errors import InputError
-from vgm_studio.model.checkpoint_schema import ModelName, parse_checkpoint_meta
+from vgm_studio.model.checkpoint_schema import parse_checkpoint_meta
 from vgm_studio.vgm.grid import VGMParams
 
 FORMAT = "vgm-studio-model/1"
-MODEL_NAMES: tuple[str, ...] = get_args(ModelName)
 
 
-def save_checkpoint(path: Path, payload: dict[str, Any]) -> None:
+def _now() -> str:
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+@dataclass
+class Checkpoint:
+    """A trained validator.
+
+    Attributes:
+        model: The registry's name of the model.
+        vgm: The VGM parameters it was trained on.
+        hyper: Its hyper-parameters (defaults included for networks).
+        threshold: p(success) at or above which it says success.
+        metrics: Validation figures (``binary_metrics``), {} without validation edges.
+        training: How it was trained: files, counts, seconds, the config.
+        state_dict: Network weights (networks).
+        score: The fitted constants (the score model).
+        history: One record per epoch.
+        device: Where it was trained.
+        created: When (UTC, ISO 8601).
+    """
+
+    model: str
+    vgm: VGMParams = field(default_factory=VGMParams)
+    hyper: dict[str, Any] = field(default_factory=dict)
+    threshold: float = DEFAULT_THRESHOLD
+    metrics: dict[str, Any] = field(default_factory=dict)
+    training: dict[str, Any] = field(default_factory=dict)
+    state_dict: dict[str, torch.Tensor] | None = None
+    score: dict[str, Any] | None = None
+    history: list[dict[str, Any]] = field(default_factory=list)
+    device: str = "cpu"
+    created: str = field(default_factory=_now)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The on-disk layout."""
+        out: dict[str, Any] = {"format": FORMAT, **self.__dict__, "vgm": asdict(self.vgm)}
+        return {k: v for k, v in out.items() if v is not None}
+
+    @classmethod
+    def from_dict(cls, content: dict[str, Any]) -> Checkpoint:
+        """Reads the on-disk layout (any version of it since ``vgm-studio-model/1``)."""
+        threshold = content.get("threshold")
+        return cls(
+            model=content["model"],
+            vgm=VGMParams(**content["vgm"]),
+            hyper=dict(content.get("hyper") or {}),
+            threshold=DEFAULT_THRESHOLD if threshold is None else float(threshold),
+            metrics=dict(content.get("metrics") or {}),
+            training=dict(content.get("training") or {}),
+            state_dict=content.get("state_dict"),
+            score=content.get("score"),
+            history=list(content.get("history") or []),
+            device=str(content.get("device", "cpu")),
+            created=str(content.get("created", "")),
+        )
+
+
+def save_checkpoint(path: Path, checkpoint: Checkpoint) -> None:
     """Writes atomically: a crash never leaves half a checkpoint behind."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     os.close(fd)
     try:
-        torch.save({"format": FORMAT, **payload}, tmp)
+        torch.save(checkpoint.to_dict(), tmp)
         os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     except BaseException:
@@ -35,7 +97,7 @@ def save_checkpoint(path: Path, payload: dict[str, Any]) -> None:
         raise
 
 
-def load_checkpoint(path: Path, expect_vgm: VGMParams | None = None) -> dict[str, Any]:
+def load_checkpoint(path: Path, expect_vgm: VGMParams | None = None) -> Checkpoint:
     """Reads and checks a checkpoint.
 
     Args:
@@ -48,12 +110,14 @@ def load_checkpoint(path: Path, expect_vgm: VGMParams | None = None) -> dict[str
     if not path.is_file():
         raise InputError(path, "no such model file")
     try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+        content = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises many types for a damaged or foreign file
         raise InputError(path, f"not a readable model checkpoint ({type(exc).__name__})") from None
-    if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
+    if not isinstance(content, dict) or content.get("format") != FORMAT:
         raise InputError(path, f"not a VGM Studio model (expected format {FORMAT})")
-    vgm = VGMParams(**parse_checkpoint_meta(ckpt, path).vgm.model_dump())
+    parse_checkpoint_meta(content, path)  # types and ranges, before anything reads them
+    checkpoint = Checkpoint.from_dict(content)
+    vgm = checkpoint.vgm
     if expect_vgm is not None and vgm != expect_vgm:
         raise InputError(
             path,
@@ -62,4 +126,4 @@ def load_checkpoint(path: Path, expect_vgm: VGMParams | None = None) -> dict[str
             f"{expect_vgm.size}, resolution {expect_vgm.resolution} m, sigma "
             f"{expect_vgm.sigma} m were asked for; retrain or use matching VGMs",
         )
-    return ckpt
+    return checkpoint

@@ -8,14 +8,19 @@ The weights themselves are checked by ``load_state_dict``.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
 from vgm_studio.errors import InputError
 from vgm_studio.matching.edge_schema import Finite, describe
+from vgm_studio.model.registry import MODEL_NAMES
 
-ModelName = Literal["vgmnet", "vgmnet-paper", "rgb-baseline", "score"]
+
+def _known_model(name: str) -> str:
+    if name not in MODEL_NAMES:
+        raise ValueError(f"unknown model (expected one of {', '.join(MODEL_NAMES)})")
+    return name
 
 
 class VGMMeta(BaseModel):
@@ -34,11 +39,11 @@ class CheckpointMeta(BaseModel):
     model_config = ConfigDict(extra="allow")
 
     format: str
-    model: ModelName
+    model: Annotated[str, Field(max_length=64), AfterValidator(_known_model)]
     vgm: VGMMeta
-    threshold: Annotated[Finite, Field(ge=0.0, le=1.0)] = 0.5
-    hyper: dict[str, Any] = Field(default_factory=dict)
-    metrics: dict[str, Any] = Field(default_factory=dict)
+    threshold: Annotated[Finite, Field(ge=0.0, le=1.0)] | None = None
+    hyper: dict[str, Any] | None = None
+    metrics: dict[str, Any] | None = None
 
 
 def parse_checkpoint_meta(ckpt: dict[str, Any], path: Path) -> CheckpointMeta:

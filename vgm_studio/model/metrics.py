@@ -8,6 +8,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.stats import rankdata
 
+from vgm_studio.core.decision import DEFAULT_THRESHOLD
+
 
 def roc_auc(labels: ArrayLike, scores: ArrayLike) -> float:
     """Area under the ROC curve: the chance a random positive outranks a random negative.
@@ -24,7 +26,7 @@ def roc_auc(labels: ArrayLike, scores: ArrayLike) -> float:
 
 
 def binary_metrics(
-    labels: ArrayLike, probabilities: ArrayLike, threshold: float = 0.5
+    labels: ArrayLike, probabilities: ArrayLike, threshold: float = DEFAULT_THRESHOLD
 ) -> dict[str, Any]:
     """Accuracy, precision, recall, F1, ROC AUC and the confusion counts.
 

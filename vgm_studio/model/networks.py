@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-from typing import Any
+from dataclasses import dataclass
 
 import torch
 from torch import nn
@@ -156,20 +155,3 @@ class RGBNet(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.head(self.features(x))
-
-
-NETWORKS: dict[str, tuple[type[nn.Module], type]] = {
-    "vgmnet-paper": (VGMNetPaper, PaperConfig),
-    "vgmnet": (VGMNet, SparseConfig),
-    "rgb-baseline": (RGBNet, RGBConfig),
-}
-
-
-def build_network(name: str, hyper: dict[str, Any] | None = None) -> tuple[nn.Module, dict]:
-    """Builds a network by name; returns it and its hyper-parameters as a plain dict."""
-    cls, config_cls = NETWORKS[name]
-    hyper = dict(hyper or {})
-    if "channels" in hyper:
-        hyper["channels"] = tuple(hyper["channels"])
-    config = config_cls(**hyper)
-    return cls(config), asdict(config)

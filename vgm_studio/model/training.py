@@ -13,7 +13,6 @@ import time
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -23,14 +22,15 @@ from numpy.typing import NDArray
 from torch import nn
 from tqdm import tqdm
 
-from vgm_studio.datasets.carmen import file_hash
+from vgm_studio.core.decision import DEFAULT_THRESHOLD
+from vgm_studio.core.hashing import content_hash
 from vgm_studio.errors import InputError
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge, read_edges
-from vgm_studio.model.checkpoint import MODEL_NAMES, save_checkpoint
+from vgm_studio.model.checkpoint import Checkpoint, save_checkpoint
 from vgm_studio.model.features import PairSample, figures_matrix, load_samples
 from vgm_studio.model.metrics import binary_metrics
-from vgm_studio.model.networks import build_network
+from vgm_studio.model.registry import build_network, entry
 from vgm_studio.model.score import ScoreModel
 from vgm_studio.model.validator import (
     InputSpec,
@@ -109,7 +109,7 @@ def read_labelled(
         files.append(
             {
                 "path": str(path),
-                "sha256": file_hash(Path(path)),
+                "sha256": content_hash(Path(path)),
                 "edges": len(found),
                 "used": len(kept),
                 "labels": dict(counts),
@@ -217,16 +217,13 @@ def train(
     out: Path,
     progress: bool = True,
     log: Callable[[str], None] = print,
-) -> dict[str, Any]:
+) -> Checkpoint:
     """Trains ``config.model`` on ``data`` and writes the checkpoint to ``out``.
 
     Returns:
-        The checkpoint's contents (weights excluded from nothing).
+        The checkpoint written.
     """
-    if config.model not in MODEL_NAMES:
-        raise InputError(
-            None, f"unknown model {config.model!r} (choose from {', '.join(MODEL_NAMES)})"
-        )
+    model = entry(config.model)
     start = time.perf_counter()
     torch.manual_seed(config.seed)
     if config.threads:
@@ -249,15 +246,14 @@ def train(
     )
     val_samples = [data.samples[i] for i in val_idx]
     val_labels = data.labels[val_idx]
-    payload: dict[str, Any] = {"model": config.model, "vgm": asdict(config.vgm)}
-
-    if config.model == "score":
+    checkpoint = Checkpoint(model=config.model, vgm=config.vgm)
+    if model.holds == "score":
         spread = bool(config.hyper.get("spread", False))
         x = figures_matrix([data.samples[i] for i in train_idx], spread)
         score = ScoreModel.fit(x, data.labels[train_idx])
         probs = score.predict(figures_matrix(val_samples, spread))
-        hyper_score = {"spread": spread} if spread else {}
-        payload |= {"hyper": hyper_score, "score": asdict(score), "device": "cpu", "history": []}
+        checkpoint.hyper = {"spread": spread} if spread else {}
+        checkpoint.score = asdict(score)
     else:
         device = pick_device(config.device)
         net, hyper = build_network(config.model, config.hyper)
@@ -268,28 +264,21 @@ def train(
         )
         net.load_state_dict(state)
         probs = 1.0 / (1.0 + np.exp(-batched_logits(net, spec, val_samples, device, 128)))
-        payload |= {
-            "hyper": hyper,
-            "device": str(device),
-            "history": history,
-            "state_dict": {k: v.detach().cpu() for k, v in state.items()},
-        }
-    threshold = choose_threshold(val_labels, probs) if len(val_idx) else 0.5
-    metrics = binary_metrics(val_labels, probs, threshold) if len(val_idx) else {}
-    seconds = time.perf_counter() - start
-    payload |= {
-        "metrics": metrics,
-        "threshold": threshold,
-        "training": {
-            "files": data.files,
-            "counts": counts,
-            "seconds": seconds,
-            "config": {k: v for k, v in asdict(config).items() if k != "vgm"},
-        },
-        "created": datetime.now(UTC).isoformat(timespec="seconds"),
+        checkpoint.hyper = hyper
+        checkpoint.device = str(device)
+        checkpoint.history = history
+        checkpoint.state_dict = {k: v.detach().cpu() for k, v in state.items()}
+    threshold = choose_threshold(val_labels, probs) if len(val_idx) else DEFAULT_THRESHOLD
+    checkpoint.threshold = threshold
+    checkpoint.metrics = binary_metrics(val_labels, probs, threshold) if len(val_idx) else {}
+    checkpoint.training = {
+        "files": data.files,
+        "counts": counts,
+        "seconds": time.perf_counter() - start,
+        "config": {k: v for k, v in asdict(config).items() if k != "vgm"},
     }
-    save_checkpoint(out, payload)
-    return payload
+    save_checkpoint(out, checkpoint)
+    return checkpoint
 
 
 def _fit(

@@ -14,7 +14,7 @@ from torch import nn
 
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
-from vgm_studio.model.checkpoint import load_checkpoint
+from vgm_studio.model.checkpoint import Checkpoint, load_checkpoint
 from vgm_studio.model.features import (
     PairSample,
     figures_matrix,
@@ -22,7 +22,7 @@ from vgm_studio.model.features import (
     rgb_batch,
     vgm_batch,
 )
-from vgm_studio.model.networks import build_network
+from vgm_studio.model.registry import build_network, entry
 from vgm_studio.model.score import ScoreModel
 from vgm_studio.vgm.grid import VGMParams
 
@@ -84,10 +84,12 @@ class InputSpec:
 
 
 def input_spec(model: str, hyper: dict[str, Any], vgm: VGMParams) -> InputSpec:
+    """How ``model``'s inputs are made, from what the registry says it reads."""
     spread = bool(hyper.get("spread", False))
-    if model == "score":
+    reads = entry(model).reads
+    if reads == "figures":
         return InputSpec("figures", vgm, spread=spread)
-    if model == "rgb-baseline":
+    if reads == "rgb":
         return InputSpec("rgb", vgm, image=int(hyper.get("image", 200)))
     fold = int(hyper.get("fold", 1))
     # A folded batch is written already lifted (see VGMNet.forward); unfolded ones are not.
@@ -131,25 +133,25 @@ class Validator:
     """
 
     def __init__(
-        self, checkpoint: dict[str, Any], device: str = "auto", path: Path | None = None
+        self, checkpoint: Checkpoint, device: str = "auto", path: Path | None = None
     ) -> None:
         self.checkpoint = checkpoint
         self.path = path
-        self.name: str = checkpoint["model"]
-        self.vgm = VGMParams(**checkpoint["vgm"])
-        self.hyper: dict[str, Any] = checkpoint.get("hyper", {})
-        self.threshold = float(checkpoint.get("threshold", 0.5))
+        self.name = checkpoint.model
+        self.vgm = checkpoint.vgm
+        self.hyper = checkpoint.hyper
+        self.threshold = checkpoint.threshold
         self.device = pick_device(device)
         self.network: nn.Module | None = None
         self.score: ScoreModel | None = None
-        if self.name == "score":
-            self.score = ScoreModel(**checkpoint["score"])
+        if entry(self.name).holds == "score":
+            self.score = ScoreModel(**(checkpoint.score or {}))
             self.spec = input_spec(self.name, self.hyper, self.vgm)
         else:
             # The full hyper-parameters (defaults included) decide how inputs are made.
             net, full = build_network(self.name, self.hyper)
             self.spec = input_spec(self.name, full, self.vgm)
-            net.load_state_dict(checkpoint["state_dict"])
+            net.load_state_dict(checkpoint.state_dict or {})
             net.eval()
             self.network = net.to(self.device).to(memory_format=torch.channels_last)  # type: ignore[call-overload]
 
@@ -164,7 +166,7 @@ class Validator:
     @property
     def metrics(self) -> dict[str, Any]:
         """The validation metrics recorded at training time."""
-        return dict(self.checkpoint.get("metrics", {}))
+        return dict(self.checkpoint.metrics)
 
     def predict_samples(
         self, samples: Sequence[PairSample], batch_size: int = 64

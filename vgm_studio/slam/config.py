@@ -4,14 +4,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
 
 from vgm_studio.graph.config import GraphConfig
 from vgm_studio.maps.config import MapConfig
-from vgm_studio.matching.labels import LabelThresholds
+from vgm_studio.matching.reference_labels import LabelThresholds
+from vgm_studio.model.registry import VALIDATOR_MODELS
 
-ValidatorName = Literal["none", "vgmnet", "rgb-baseline", "score", "reference"]
-VALIDATORS: tuple[str, ...] = ("none", "vgmnet", "rgb-baseline", "score", "reference")
+# ``none`` keeps every edge, the model validators come from the model registry, ``reference``
+# keeps the edges that land on the reference pose.
+ValidatorName = str
+VALIDATORS: tuple[str, ...] = ("none", *VALIDATOR_MODELS, "reference")
 
 
 @dataclass(frozen=True)

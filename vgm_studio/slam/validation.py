@@ -17,20 +17,14 @@ from numpy.typing import NDArray
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.errors import InputError
-from vgm_studio.matching.labels import reference_label
+from vgm_studio.matching.reference_labels import reference_label
 from vgm_studio.model.features import sample_from_scans
+from vgm_studio.model.registry import VALIDATOR_MODELS
 from vgm_studio.slam.config import ValidationConfig
 from vgm_studio.slam.edges import SlamEdge
 
 if TYPE_CHECKING:
     from vgm_studio.model.validator import Validator
-
-# Which checkpoints each model validator accepts.
-_MODELS = {
-    "vgmnet": ("vgmnet", "vgmnet-paper"),
-    "rgb-baseline": ("rgb-baseline",),
-    "score": ("score",),
-}
 
 
 class EdgeValidator:
@@ -62,7 +56,7 @@ class EdgeValidator:
                 "--validator reference needs reference poses: a log with TRUEPOS or a "
                 "corrected log, or --reference with one",
             )
-        if config.validator in _MODELS:
+        if config.validator in VALIDATOR_MODELS:
             self.model = _load(config.model, config.validator)
 
     def __call__(self, edges: Sequence[SlamEdge]) -> None:
@@ -108,6 +102,6 @@ def _load(path: Path | None, validator: str) -> Validator:
     if path is None:
         raise InputError(None, f"--validator {validator} needs --model, a checkpoint of that model")
     model = Validator.load(path)
-    if model.name not in _MODELS[validator]:
+    if model.name not in VALIDATOR_MODELS[validator]:
         raise InputError(path, f"is a {model.name} checkpoint, not one for --validator {validator}")
     return model

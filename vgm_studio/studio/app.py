@@ -102,6 +102,12 @@ def check_port_free(host: str, port: int) -> None:
 class Studio:
     """Serves a workspace's edges for labeling.
 
+    Args:
+        store: The workspace's store.
+        config: How to serve.
+        scans: Where edges' logs are read from (shared with a caller that has them open).
+        train_now: Called by the panel's "Train now"; None: no trainer runs beside it.
+
     Example:
         >>> studio = Studio(LabelStore("ws"), StudioConfig(port=8080))
         >>> studio.start()
@@ -109,7 +115,11 @@ class Studio:
     """
 
     def __init__(
-        self, store: LabelStore, config: StudioConfig, scans: EdgeScans | None = None
+        self,
+        store: LabelStore,
+        config: StudioConfig,
+        scans: EdgeScans | None = None,
+        train_now: Callable[[], None] | None = None,
     ) -> None:
         self.store = store
         self.config = config
@@ -122,8 +132,8 @@ class Studio:
         self._lock = threading.RLock()
         self._prefetcher = ThreadPoolExecutor(max_workers=1, thread_name_prefix="prefetch")
         self.server: viser.ViserServer | None = None
-        # Set by whoever runs a trainer beside the studio ("Train now" in the panel).
-        self.train_now: Callable[[], None] | None = None
+        # "Train now" in the panel; None when no trainer runs beside the studio.
+        self._train_now_callback = train_now
         self._trainer_text = ""
 
     @property
@@ -187,12 +197,12 @@ class Studio:
             tab.panel.trainer.content = text
 
     def _train_now(self, tab: _Tab) -> None:
-        if self.train_now is None:
+        if self._train_now_callback is None:
             tab.client.add_notification(
                 "No trainer", "This studio runs without one.", auto_close_seconds=3.0
             )
             return
-        self.train_now()
+        self._train_now_callback()
         tab.client.add_notification(
             "Training asked for", "The trainer starts a new version.", auto_close_seconds=3.0
         )

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import dataclass, field
 from enum import Enum
+
+from vgm_studio.core.decision import DEFAULT_THRESHOLD
+from vgm_studio.labels.votes import human_label, is_conflict
+
+__all__ = ["Queue", "Snapshot", "human_label", "is_conflict", "order"]
 
 
 class Queue(str, Enum):
@@ -36,19 +40,7 @@ class Snapshot:
     edge_ids: list[str]
     labels: dict[str, dict[str, str]] = field(default_factory=dict)
     predictions: dict[str, float] = field(default_factory=dict)
-    threshold: float = 0.5
-
-
-def human_label(votes: dict[str, str]) -> str | None:
-    """The majority label of an edge's annotators; None when unlabelled or tied."""
-    if not votes:
-        return None
-    (top, n), *rest = Counter(votes.values()).most_common()
-    return None if rest and rest[0][1] == n else top
-
-
-def is_conflict(votes: dict[str, str]) -> bool:
-    return len(set(votes.values())) > 1
+    threshold: float = DEFAULT_THRESHOLD
 
 
 def order(queue: Queue, snap: Snapshot) -> list[str]:

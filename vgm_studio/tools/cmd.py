@@ -1,27 +1,37 @@
-"""The ``vgm-studio`` command line: thin wrappers over the package's stages."""
+"""The ``vgm-studio`` command line: each command parses, calls one function, prints.
+
+The work is done in ``vgm_studio.services`` (and ``studio.serve``, ``trainer.process``); options
+shared between commands are declared once in ``tools/options.py``. Each command imports its
+service when it runs, so ``--help`` and a quick ``info`` do not wait for torch to load.
+"""
 
 from __future__ import annotations
 
-import json
-import math
-import os
-import sys
-import tempfile
-import time
-from collections import Counter
-from enum import Enum
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
-from vgm_studio.datasets import ReadOptions, open_log
-from vgm_studio.errors import InputError
+from vgm_studio.datasets import ReadOptions
+from vgm_studio.errors import exit_on_error
 from vgm_studio.tools import model_cmds, slam_cmd, studio_cmds, trainer_cmds
-from vgm_studio.tools.sources import report_skipped
+from vgm_studio.tools.options import (
+    LogArg,
+    MaxLoopsOpt,
+    TimeToleranceOpt,
+    non_negative,
+    number,
+    png_file,
+    positive,
+    with_read_options,
+    writable_file,
+    writable_folder,
+)
+
+PROG = "vgm-studio"
 
 app = typer.Typer(
-    name="vgm-studio",
+    name=PROG,
     help="Label, validate and debug 2D LiDAR scan-matching edges with Validation Grid Maps.",
     no_args_is_help=True,
     add_completion=False,
@@ -30,131 +40,12 @@ app = typer.Typer(
 )
 
 
-class Poses(str, Enum):
-    auto = "auto"
-    odometry = "odometry"
-    reference = "reference"
-
-
-class Laser(str, Enum):
-    front = "front"
-    rear = "rear"
-
-
-def _number(
-    lo: float | None = None,
-    hi: float | None = None,
-    *,
-    lo_open: bool = False,
-    optional: bool = False,
-) -> Any:
-    """A typer callback: the value must be finite and within [lo, hi] ((lo, hi] when lo_open).
-
-    click's own ranges let ``nan`` and ``inf`` through (nan compares false with every bound),
-    and a non-finite threshold quietly turns every comparison downstream into nonsense.
-    """
-
-    def check(value: Any) -> Any:
-        if value is None and optional:
-            return value
-        if not math.isfinite(value):
-            raise typer.BadParameter(f"{value} is not a finite number.")
-        if lo is not None and (value <= lo if lo_open else value < lo):
-            sign = ">" if lo_open else "≥"
-            raise typer.BadParameter(f"{value:g} is out of range: it must be {sign} {lo:g}.")
-        if hi is not None and value > hi:
-            raise typer.BadParameter(f"{value:g} is out of range: it must be ≤ {hi:g}.")
-        return value
-
-    return check
-
-
-def _writable_file(path: Path) -> None:
-    """Fails now, before minutes of work, if ``path`` cannot be written.
-
-    Raises:
-        InputError: ``path`` is a folder, or its folder cannot be made or written.
-    """
-    if path.is_dir():
-        raise InputError(path, "is a folder; give a file name to write")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as exc:
-        raise InputError(path, f"cannot write here ({exc.strerror or exc})") from None
-
-
-def _writable_folder(path: Path) -> None:
-    """Fails now if ``path`` cannot be a folder to write files into.
-
-    Raises:
-        InputError: ``path`` is a file, or cannot be made or written.
-    """
-    if path.exists() and not path.is_dir():
-        raise InputError(path, "is a file, not a folder; --out takes a folder")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(prefix=".vgm-studio.", dir=path)
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as exc:
-        raise InputError(path, f"cannot write here ({exc.strerror or exc})") from None
-
-
-LogArg = Annotated[
-    Path, typer.Argument(metavar="LOG", help="CARMEN log, ROS 1 .bag or ROS 2 bag folder.")
-]
-PosesOpt = Annotated[
-    Poses,
-    typer.Option(
-        help="What the scans' pose fields hold (auto: GMapping output → reference, else odometry)."
-    ),
-]
-FovOpt = Annotated[
-    float,
-    typer.Option(
-        "--fov",
-        help="FLASER field of view in degrees, in (0, 360].",
-        callback=_number(0, 360, lo_open=True),
-    ),
-]
-MaxRangeOpt = Annotated[
-    float | None,
-    typer.Option(
-        help="Readings at or beyond this (m, > 0) are no-returns.",
-        show_default="the message's, or 95% of the log's largest reading",
-        callback=_number(0, lo_open=True, optional=True),
-    ),
-]
-LaserOpt = Annotated[Laser, typer.Option(help="front: FLASER/ROBOTLASER1; rear: RLASER.")]
-SkipOpt = Annotated[bool, typer.Option(help="Skip malformed lines and report how many.")]
-ScanTopicOpt = Annotated[str | None, typer.Option(help="ROS bags: LaserScan topic.")]
-OdomTopicOpt = Annotated[str | None, typer.Option(help="ROS bags: Odometry topic.")]
-
-
-def _read_options(
-    poses: Poses,
-    fov: float,
-    max_range: float | None,
-    laser: Laser,
-    skip_bad_lines: bool,
-    scan_topic: str | None = None,
-    odom_topic: str | None = None,
-) -> ReadOptions:
-    return ReadOptions(
-        poses=poses.value,
-        fov_deg=fov,
-        max_range=max_range,
-        laser=laser.value,
-        skip_bad_lines=skip_bad_lines,
-        scan_topic=scan_topic,
-        odom_topic=odom_topic,
-    )
+def _warn(line: str) -> None:
+    typer.echo(line, err=True)
 
 
 @app.command()
+@with_read_options
 def info(
     log: Annotated[
         Path,
@@ -163,42 +54,13 @@ def info(
             help="CARMEN log, ROS 1 .bag, ROS 2 bag folder, or Freiburg relations file.",
         ),
     ],
-    poses: PosesOpt = Poses.auto,
-    fov: FovOpt = 180.0,
-    max_range: MaxRangeOpt = None,
-    laser: LaserOpt = Laser.front,
-    skip_bad_lines: SkipOpt = False,
-    scan_topic: ScanTopicOpt = None,
-    odom_topic: OdomTopicOpt = None,
+    read: ReadOptions,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
 ) -> None:
     """Print what a log holds: scans, beams, field of view, duration, poses, distance."""
-    from vgm_studio.datasets.relations import looks_like_relations, read_relations
-    from vgm_studio.tools.info import format_summary, summarize
+    from vgm_studio.services.info import describe
 
-    if log.is_file() and looks_like_relations(log):
-        rel = read_relations(log)
-        stamps = {r.t_a for r in rel} | {r.t_b for r in rel}
-        if as_json:
-            summary = {
-                "path": str(log),
-                "format": "relations",
-                "relations": len(rel),
-                "timestamps": len(stamps),
-            }
-            typer.echo(json.dumps(summary, indent=2))
-        else:
-            typer.echo(
-                f"{log}: Freiburg relations file, {len(rel)} relations "
-                f"between {len(stamps)} scan timestamps"
-            )
-        return
-    scan_log = open_log(
-        log, _read_options(poses, fov, max_range, laser, skip_bad_lines, scan_topic, odom_topic)
-    )
-    summary = summarize(scan_log)
-    typer.echo(json.dumps(summary, indent=2) if as_json else format_summary(summary))
-    report_skipped(scan_log)
+    typer.echo(describe(log, read, as_json, warn=_warn))
 
 
 def _preset(value: Any) -> Any:
@@ -226,29 +88,19 @@ def simulate(
         typer.Option(
             "--fov",
             help="Field of view, degrees, in (0, 360].",
-            callback=_number(0, 360, lo_open=True),
+            callback=number(0, 360, lo_open=True),
         ),
     ] = 180.0,
-    range_noise: Annotated[
-        float, typer.Option(help="Range noise σ, metres (≥ 0).", callback=_number(0))
-    ] = 0.01,
-    max_range: Annotated[
-        float,
-        typer.Option(help="Sensor maximum range, metres (> 0).", callback=_number(0, lo_open=True)),
-    ] = 30.0,
+    range_noise: Annotated[float, non_negative("Range noise σ, metres (≥ 0).")] = 0.01,
+    max_range: Annotated[float, positive("Sensor maximum range, metres (> 0).")] = 30.0,
     people: Annotated[int, typer.Option(help="Moving people in the world.", min=0)] = 0,
-    scan_spacing: Annotated[
-        float,
-        typer.Option(
-            help="Metres travelled between scans (> 0).", callback=_number(0, lo_open=True)
-        ),
-    ] = 0.1,
+    scan_spacing: Annotated[float, positive("Metres travelled between scans (> 0).")] = 0.1,
     laps: Annotated[
         float | None,
         typer.Option(
             help="Laps of the route (> 0).",
             show_default="the preset's",
-            callback=_number(0, lo_open=True, optional=True),
+            callback=number(0, lo_open=True, optional=True),
         ),
     ] = None,
 ) -> None:
@@ -267,23 +119,16 @@ def simulate(
         scan_spacing=scan_spacing,
         laps=laps,
     )
-    _writable_folder(out)
-    path = run(config, out)
-    typer.echo(f"wrote {path}")
-
-
-def _positive(what: str) -> Any:
-    return typer.Option(help=what, callback=_number(0, lo_open=True))
-
-
-def _non_negative(what: str) -> Any:
-    return typer.Option(help=what, callback=_number(0))
+    writable_folder(out)
+    typer.echo(f"wrote {run(config, out)}")
 
 
 @app.command()
+@with_read_options
 def candidates(
     log: LogArg,
     out: Annotated[Path, typer.Option(metavar="EDGES.jsonl", help="Edges JSONL file to write.")],
+    read: ReadOptions,
     reference: Annotated[
         Path | None,
         typer.Option(
@@ -293,80 +138,54 @@ def candidates(
         ),
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed for loop sampling and guess noise.", min=0)] = 0,
-    max_loops: Annotated[int, typer.Option("--max", help="Loop candidates at most.", min=1)] = 2000,
+    max_loops: MaxLoopsOpt = 2000,
     min_gap: Annotated[
         int, typer.Option(help="Loop pairs at least this many scans apart.", min=0)
     ] = 50,
-    max_distance: Annotated[float, _positive("Loop pairs within this many metres (> 0).")] = 3.0,
+    max_distance: Annotated[float, positive("Loop pairs within this many metres (> 0).")] = 3.0,
     max_angle: Annotated[
         float,
         typer.Option(
             help="Loop pairs within this many degrees, in (0, 180].",
-            callback=_number(0, 180, lo_open=True),
+            callback=number(0, 180, lo_open=True),
         ),
     ] = 45.0,
-    noise_xy: Annotated[float, _non_negative("Guess noise σ in x and y, metres (≥ 0).")] = 0.3,
-    noise_theta: Annotated[float, _non_negative("Guess noise σ in θ, degrees (≥ 0).")] = 5.0,
+    noise_xy: Annotated[float, non_negative("Guess noise σ in x and y, metres (≥ 0).")] = 0.3,
+    noise_theta: Annotated[float, non_negative("Guess noise σ in θ, degrees (≥ 0).")] = 5.0,
     keyframe_distance: Annotated[
-        float, _non_negative("Keyframe every this many metres (0: every scan).")
+        float, non_negative("Keyframe every this many metres (0: every scan).")
     ] = 0.0,
-    keyframe_angle: Annotated[float, _non_negative("…or this many degrees (0: off).")] = 0.0,
+    keyframe_angle: Annotated[float, non_negative("…or this many degrees (0: off).")] = 0.0,
     sequential: Annotated[bool, typer.Option(help="Make sequential edges.")] = True,
     loops: Annotated[bool, typer.Option(help="Make loop edges.")] = True,
-    success_xy: Annotated[float, _positive("Success: |e_xy| ≤ this (m)…")] = 0.10,
-    success_theta: Annotated[float, _positive("…and |e_θ| ≤ this (deg).")] = 2.0,
-    failure_xy: Annotated[float, _positive("Failure: |e_xy| ≥ this (m, > success)…")] = 0.30,
-    failure_theta: Annotated[float, _positive("…or |e_θ| ≥ this (deg, > success).")] = 5.0,
-    time_tolerance: Annotated[
-        float,
-        typer.Option(
-            help="Reference timestamps match within this many seconds, in (0, 10].",
-            callback=_number(0, 10, lo_open=True),
-        ),
-    ] = 0.05,
+    success_xy: Annotated[float, positive("Success: |e_xy| ≤ this (m)…")] = 0.10,
+    success_theta: Annotated[float, positive("…and |e_θ| ≤ this (deg).")] = 2.0,
+    failure_xy: Annotated[float, positive("Failure: |e_xy| ≥ this (m, > success)…")] = 0.30,
+    failure_theta: Annotated[float, positive("…or |e_θ| ≥ this (deg, > success).")] = 5.0,
+    time_tolerance: TimeToleranceOpt = 0.05,
     time_offset: Annotated[
         float,
         typer.Option(
             help="Seconds added to a reference log's timestamps before the join "
             "(a GMapping log counts from the start of the run).",
-            callback=_number(),
+            callback=number(),
         ),
     ] = 0.0,
-    poses: PosesOpt = Poses.auto,
-    fov: FovOpt = 180.0,
-    max_range: MaxRangeOpt = None,
-    laser: LaserOpt = Laser.front,
-    skip_bad_lines: SkipOpt = False,
-    scan_topic: ScanTopicOpt = None,
-    odom_topic: OdomTopicOpt = None,
 ) -> None:
     """Match candidate edges of a log and label them against a reference; write JSONL."""
-    from vgm_studio.matching.candidates import CandidateConfig, make_candidates
-    from vgm_studio.matching.edges import write_edges
-    from vgm_studio.matching.labels import LabelThresholds
-    from vgm_studio.matching.matcher import ScanMatcher
-    from vgm_studio.tools.sources import read_source
+    from vgm_studio.datasets.source import JoinOptions
+    from vgm_studio.matching.candidates import CandidateConfig
+    from vgm_studio.matching.reference_labels import LabelThresholds
+    from vgm_studio.services.candidates import make_edge_file
 
     if not sequential and not loops:
         raise typer.BadParameter("--no-sequential and --no-loops leave no edges to make.")
-    if success_xy >= failure_xy:
-        raise typer.BadParameter(
-            f"--success-xy {success_xy:g} must be below --failure-xy {failure_xy:g}."
-        )
-    if success_theta >= failure_theta:
-        raise typer.BadParameter(
-            f"--success-theta {success_theta:g} must be below --failure-theta {failure_theta:g}."
-        )
-    _writable_file(out)
-    options = _read_options(poses, fov, max_range, laser, skip_bad_lines, scan_topic, odom_topic)
-    source = read_source(
-        log,
-        options,
-        reference,
-        time_tolerance=time_tolerance,
-        time_offset=time_offset,
-        max_loops=max_loops if loops else None,
-    )
+    for name, ok, fail in (("xy", success_xy, failure_xy), ("theta", success_theta, failure_theta)):
+        if ok >= fail:
+            raise typer.BadParameter(
+                f"--success-{name} {ok:g} must be below --failure-{name} {fail:g}."
+            )
+    writable_file(out)
     config = CandidateConfig(
         sequential=sequential,
         loops=loops,
@@ -381,37 +200,9 @@ def candidates(
         noise_theta_deg=noise_theta,
     )
     thresholds = LabelThresholds(success_xy, success_theta, failure_xy, failure_theta)
-    start = time.perf_counter()
-    edges = make_candidates(
-        source.log, ScanMatcher(), config, thresholds, source.relations, source.params
-    )
-    seconds = time.perf_counter() - start
-    try:
-        write_edges(out, edges)
-    except OSError as exc:
-        raise InputError(out, f"cannot write ({exc.strerror or exc})") from None
-    _print_edge_summary(edges, seconds, out)
-
-
-def _print_edge_summary(edges: list[Any], seconds: float, out: Path) -> None:
-    counts = Counter((e.kind, e.label or "unlabelled") for e in edges)
-    typer.echo(
-        f"wrote {len(edges)} edges to {out} in {seconds:.1f} s "
-        f"({len(edges) / max(seconds, 1e-9):.0f} edges/s)"
-    )
-    labels = ("success", "failure", "ambiguous", "unlabelled")
-    typer.echo(f"{'kind':<12}" + "".join(f"{lab:>12}" for lab in labels))
-    for kind in ("sequential", "loop"):
-        if any(k == kind for k, _ in counts):
-            typer.echo(f"{kind:<12}" + "".join(f"{counts[(kind, lab)]:>12}" for lab in labels))
-
-
-def _png(value: Any) -> Any:
-    if value.is_dir():
-        raise typer.BadParameter(f"{value} is a folder; give a .png file name.")
-    if value.suffix.lower() != ".png":
-        raise typer.BadParameter(f"{value} must end in .png (pictures are written as PNG).")
-    return value
+    join = JoinOptions(time_tolerance, time_offset)
+    run = make_edge_file(log, out, read, reference, join, config, thresholds, warn=_warn)
+    typer.echo(run.table())
 
 
 @app.command()
@@ -424,34 +215,22 @@ def vgm(
             help="edge_id (or a unique prefix) to draw; the first field of each line.",
         ),
     ],
-    png: Annotated[Path, typer.Option(metavar="FILE.png", help="Picture to write.", callback=_png)],
+    png: Annotated[
+        Path, typer.Option(metavar="FILE.png", help="Picture to write.", callback=png_file)
+    ],
     guess: Annotated[
         bool,
         typer.Option(help="Place the current scan by the initial guess instead of the estimate."),
     ] = False,
     size: Annotated[int, typer.Option(help="VGM cells per side.", min=8)] = 400,
-    resolution: Annotated[float, _positive("VGM cell edge, metres (> 0).")] = 0.05,
-    sigma: Annotated[float, _positive("VGM covariance regulariser, metres (> 0).")] = 0.02,
+    resolution: Annotated[float, positive("VGM cell edge, metres (> 0).")] = 0.05,
+    sigma: Annotated[float, positive("VGM covariance regulariser, metres (> 0).")] = 0.02,
 ) -> None:
     """Draw one edge: both scans in two colours over the two VGM channels."""
-    from vgm_studio.matching.edges import read_edges
-    from vgm_studio.vgm.picture import edge_picture
+    from vgm_studio.vgm.picture import draw_edge
 
-    edges = read_edges(edges_file)
-    hits = [e for e in edges if e.edge_id.startswith(edge)]
-    if len(hits) != 1:
-        what = "no edge" if not hits else f"{len(hits)} edges"
-        raise InputError(edges_file, f"{what} with id {edge!r}")
-    _writable_file(png)
-    edge_picture(
-        hits[0],
-        png,
-        use_guess=guess,
-        size=size,
-        resolution=resolution,
-        sigma=sigma,
-        search_dirs=(edges_file.parent,),
-    )
+    writable_file(png)
+    draw_edge(edges_file, edge, png, use_guess=guess, size=size, resolution=resolution, sigma=sigma)
     typer.echo(f"wrote {png}")
 
 
@@ -468,19 +247,17 @@ app.command("models")(trainer_cmds.models)
 
 def main(argv: list[str] | None = None) -> None:
     """Entry point: runs the CLI and turns every expected error into one line and an exit code."""
+    exit_on_error(PROG, lambda: _run(argv))
+
+
+def _run(argv: list[str] | None) -> None:
     command = typer.main.get_command(app)
     try:
-        command.main(args=argv, prog_name="vgm-studio", standalone_mode=False)
-    except InputError as exc:
-        typer.echo(f"vgm-studio: error: {exc}", err=True)
-        sys.exit(1)
-    except (typer.Abort, KeyboardInterrupt):
-        typer.echo("vgm-studio: interrupted", err=True)
-        sys.exit(130)
+        command.main(args=argv, prog_name=PROG, standalone_mode=False)
+    except typer.Abort:
+        raise KeyboardInterrupt from None
     except typer.TyperException as exc:
         _usage_error(exc)
-    except BrokenPipeError:
-        sys.exit(0)
 
 
 def _usage_error(exc: Exception) -> None:
@@ -488,12 +265,12 @@ def _usage_error(exc: Exception) -> None:
     ctx = getattr(exc, "ctx", None)
     if type(exc).__name__ == "NoArgsIsHelpError" and ctx is not None:
         typer.echo(ctx.get_help(), err=True)
-        sys.exit(2)
-    name = f" {ctx.info_name}" if ctx is not None and ctx.info_name != "vgm-studio" else ""
+        raise SystemExit(2)
+    name = f" {ctx.info_name}" if ctx is not None and ctx.info_name != PROG else ""
     format_message = getattr(exc, "format_message", None)
     message = format_message() if callable(format_message) else str(exc)
-    typer.echo(f"vgm-studio{name}: error: {message}", err=True)
-    sys.exit(int(getattr(exc, "exit_code", 2)))
+    typer.echo(f"{PROG}{name}: error: {message}", err=True)
+    raise SystemExit(int(getattr(exc, "exit_code", 2)))
 
 
 if __name__ == "__main__":

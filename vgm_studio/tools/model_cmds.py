@@ -2,38 +2,23 @@
 
 from __future__ import annotations
 
-import json
-import time
-from enum import Enum
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import typer
 
-from vgm_studio.errors import InputError
+from vgm_studio.model.registry import MODEL_NAMES, HyperFlags, entry
+from vgm_studio.tools.options import Device, DeviceOpt, one_of
 
 EdgesArg = Annotated[
     list[Path], typer.Argument(metavar="EDGES.jsonl...", help="Labelled edge files.")
 ]
 
 
-class ModelName(str, Enum):
-    vgmnet = "vgmnet"
-    vgmnet_paper = "vgmnet-paper"
-    rgb_baseline = "rgb-baseline"
-    score = "score"
-
-
-class Device(str, Enum):
-    auto = "auto"
-    cpu = "cpu"
-    cuda = "cuda"
-
-
 def train(
     edges: EdgesArg,
     out: Annotated[Path, typer.Option(help="Checkpoint to write (.pt).")],
-    model: Annotated[ModelName, typer.Option(help="Which model.")] = ModelName.vgmnet,
+    model: Annotated[str, one_of(MODEL_NAMES, "Which model.")] = "vgmnet",
     epochs: Annotated[int, typer.Option(min=1, help="Epochs at most.")] = 12,
     batch_size: Annotated[int, typer.Option(min=1, help="Pairs per step.")] = 64,
     lr: Annotated[float, typer.Option(min=0.0, help="Adam learning rate.")] = 2e-3,
@@ -60,29 +45,17 @@ def train(
         ),
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed for split, draws and weights.")] = 0,
-    device: Annotated[Device, typer.Option(help="auto takes a GPU when there is one.")] = (
-        Device.auto
-    ),
+    device: DeviceOpt = Device.auto,
     threads: Annotated[int | None, typer.Option(min=1, help="torch CPU threads.")] = None,
 ) -> None:
     """Train a validator on labelled edges (ambiguous and unlabelled ones are left out)."""
-    from vgm_studio.model.training import TrainConfig, read_labelled
-    from vgm_studio.model.training import train as run
+    from vgm_studio.model.training import TrainConfig
+    from vgm_studio.services.models import train_model
 
     if out.suffix != ".pt":
         raise typer.BadParameter("the checkpoint must end in .pt", param_hint="--out")
-    data = read_labelled(edges)
-    hyper: dict[str, Any] = {}
-    if model is ModelName.vgmnet:
-        hyper = {
-            "figures": figures,
-            "occupancy": occupancy,
-            "spread": figures and spread is not False,
-        }
-    elif model is ModelName.score:
-        hyper = {"spread": bool(spread)}
     config = TrainConfig(
-        model=model.value,
+        model=model,
         epochs=epochs,
         batch_size=batch_size,
         lr=lr,
@@ -94,18 +67,9 @@ def train(
         seed=seed,
         device=device.value,
         threads=threads,
-        hyper=hyper,
+        hyper=entry(model).hyper(HyperFlags(figures, occupancy, spread)),
     )
-    try:
-        payload = run(data, config, out, log=lambda line: typer.echo(line, err=True))
-    except ValueError as exc:
-        raise InputError(out, str(exc)) from None
-    m = {"accuracy": float("nan"), "f1": float("nan"), "auc": float("nan"), **payload["metrics"]}
-    typer.echo(
-        f"wrote {out} ({payload['training']['seconds']:.0f} s); validation: "
-        f"accuracy {m['accuracy']:.3f}, F1 {m['f1']:.3f}, AUC {m['auc']:.3f} "
-        f"at p(success) ≥ {payload['threshold']:.2f}"
-    )
+    typer.echo(train_model(edges, out, config, warn=lambda line: typer.echo(line, err=True)))
 
 
 def evaluate(
@@ -114,55 +78,10 @@ def evaluate(
     json_out: Annotated[
         Path | None, typer.Option("--json", help="Also write the figures as JSON here.")
     ] = None,
-    device: Annotated[Device, typer.Option(help="auto takes a GPU when there is one.")] = (
-        Device.auto
-    ),
+    device: DeviceOpt = Device.auto,
     batch_size: Annotated[int, typer.Option(min=1, help="Pairs per batch.")] = 64,
 ) -> None:
     """Evaluate a model on labelled edges: accuracy, precision, recall, F1, AUC, TP/FP/TN/FN."""
-    from vgm_studio.model.metrics import binary_metrics
-    from vgm_studio.model.training import read_labelled
-    from vgm_studio.model.validator import Validator
+    from vgm_studio.services.models import evaluate_model
 
-    validator = Validator.load(model, device=device.value)
-    data = read_labelled(edges)
-    start = time.perf_counter()
-    probs = validator.predict_samples(data.samples, batch_size)
-    seconds = time.perf_counter() - start
-    m = binary_metrics(data.labels, probs, validator.threshold)
-    typer.echo(format_metrics(validator.name, m, validator.threshold, seconds))
-    if json_out is not None:
-        record = {
-            **m,
-            "model": validator.name,
-            "threshold": validator.threshold,
-            "seconds": seconds,
-            "edges": [str(p) for p in edges],
-        }
-        try:
-            json_out.parent.mkdir(parents=True, exist_ok=True)
-            json_out.write_text(json.dumps(record, indent=2) + "\n")
-        except OSError as exc:
-            raise InputError(
-                json_out, f"cannot write ({exc.strerror or type(exc).__name__})"
-            ) from None
-
-
-def format_metrics(name: str, m: dict[str, Any], threshold: float, seconds: float) -> str:
-    """The paper's table layout: the rates, then the confusion counts."""
-    rows = [
-        f"model      {name}  (success = positive, p(success) ≥ {threshold:.2f})",
-        f"edges      {m['n']}  ({m['tp'] + m['fn']} success, {m['tn'] + m['fp']} failure)",
-        f"accuracy   {m['accuracy']:.4f}",
-        f"precision  {m['precision']:.4f}",
-        f"recall     {m['recall']:.4f}",
-        f"F1         {m['f1']:.4f}",
-        f"ROC AUC    {m['auc']:.4f}",
-        "",
-        "                 predicted success  predicted failure",
-        f"true success     TP {m['tp']:>14}  FN {m['fn']:>14}",
-        f"true failure     FP {m['fp']:>14}  TN {m['tn']:>14}",
-        "",
-        f"inference  {seconds:.2f} s ({m['n'] / max(seconds, 1e-9):.0f} pairs/s, VGMs included)",
-    ]
-    return "\n".join(rows)
+    typer.echo(evaluate_model(model, edges, json_out, device.value, batch_size))

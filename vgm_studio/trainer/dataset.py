@@ -18,11 +18,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vgm_studio.labels.store import LabelStore
+from vgm_studio.labels.votes import human_label
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
 from vgm_studio.model.features import PairSample, load_samples
 from vgm_studio.model.training import read_labelled
-from vgm_studio.studio.queues import human_label
 from vgm_studio.trainer.registry import ensure_tables
 
 

@@ -15,7 +15,6 @@ import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -23,10 +22,11 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from vgm_studio.model.checkpoint import FORMAT
+from vgm_studio.core.decision import DEFAULT_THRESHOLD
+from vgm_studio.model.checkpoint import Checkpoint
 from vgm_studio.model.features import PairSample
 from vgm_studio.model.metrics import binary_metrics
-from vgm_studio.model.networks import build_network
+from vgm_studio.model.registry import MODELS, build_network
 from vgm_studio.model.training import (
     balanced_bce,
     balanced_draws,
@@ -36,7 +36,8 @@ from vgm_studio.model.training import (
 from vgm_studio.model.validator import batched_logits, input_spec
 from vgm_studio.vgm.grid import VGMParams
 
-MODEL = "vgmnet"
+# The model the background trainer trains: the registry's one that it can.
+MODEL = next(m.name for m in MODELS if m.background)
 
 
 @dataclass(frozen=True)
@@ -92,7 +93,7 @@ def fit(
     train_idx: NDArray[np.int64],
     held_idx: NDArray[np.int64],
     config: FitConfig,
-    init: dict[str, Any] | None = None,
+    init: Checkpoint | None = None,
     on_epoch: EpochHook | None = None,
 ) -> FitResult:
     """Trains ``vgmnet`` on ``train_idx`` and judges it on ``held_idx``.
@@ -113,10 +114,10 @@ def fit(
     torch.manual_seed(config.seed)
     device = torch.device("cpu")  # beside the app: the GPU, if any, is not ours to take
     net, hyper = build_network(MODEL, config.hyper)
-    warm = init is not None and init.get("model") == MODEL and init.get("hyper") == hyper
+    warm = init is not None and init.model == MODEL and init.hyper == hyper
     if warm:
-        assert init is not None
-        net.load_state_dict(init["state_dict"])
+        assert init is not None and init.state_dict is not None
+        net.load_state_dict(init.state_dict)
     net = net.to(memory_format=torch.channels_last)  # type: ignore[call-overload]
     spec = input_spec(MODEL, hyper, config.vgm)
     rng = np.random.default_rng(config.seed)
@@ -165,7 +166,7 @@ def fit(
         threshold = choose_threshold(held_labels, p)
         metrics = binary_metrics(held_labels, p, threshold)
     else:
-        p, threshold, metrics = np.zeros(0), 0.5, {}
+        p, threshold, metrics = np.zeros(0), DEFAULT_THRESHOLD, {}
     return FitResult(
         state_dict={k: v.detach().cpu() for k, v in best_state.items()},
         hyper=hyper,
@@ -177,27 +178,21 @@ def fit(
     )
 
 
-def payload(result: FitResult, config: FitConfig, training: dict[str, Any]) -> dict[str, Any]:
-    """A checkpoint in ``vgm-studio train``'s layout, so ``Validator.load`` and ``eval`` take it."""
-    return {
-        "format": FORMAT,
-        "model": MODEL,
-        "vgm": asdict(config.vgm),
-        "hyper": result.hyper,
-        "device": "cpu",
-        "history": result.history,
-        "state_dict": result.state_dict,
-        "metrics": result.metrics,
-        "threshold": result.threshold,
-        "training": {
-            **training,
-            "config": {k: v for k, v in asdict(config).items() if k != "vgm"},
-        },
-        "created": datetime.now(UTC).isoformat(timespec="seconds"),
-    }
+def payload(result: FitResult, config: FitConfig, training: dict[str, Any]) -> Checkpoint:
+    """The version as a checkpoint, so ``Validator`` and ``eval`` take it."""
+    return Checkpoint(
+        model=MODEL,
+        vgm=config.vgm,
+        hyper=result.hyper,
+        threshold=result.threshold,
+        metrics=result.metrics,
+        training={**training, "config": {k: v for k, v in asdict(config).items() if k != "vgm"}},
+        state_dict=result.state_dict,
+        history=result.history,
+    )
 
 
-def write_checkpoint(folder: Path, content: dict[str, Any]) -> Path:
+def write_checkpoint(folder: Path, checkpoint: Checkpoint) -> Path:
     """Writes a checkpoint to a fresh file in ``folder``, flushed to disk; returns its path.
 
     The file is whole before ``register_model`` renames it into place, so a registered
@@ -207,7 +202,7 @@ def write_checkpoint(folder: Path, content: dict[str, Any]) -> Path:
     fd, tmp = tempfile.mkstemp(prefix=".pending-", suffix=".pt", dir=folder)
     try:
         with os.fdopen(fd, "wb") as f:
-            torch.save(content, f)
+            torch.save(checkpoint.to_dict(), f)
             f.flush()
             os.fsync(f.fileno())
         os.chmod(tmp, 0o644)

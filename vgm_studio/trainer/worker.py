@@ -24,6 +24,7 @@ import torch
 
 from vgm_studio.errors import InputError
 from vgm_studio.labels.store import LabelStore
+from vgm_studio.model.checkpoint import Checkpoint, load_checkpoint
 from vgm_studio.model.metrics import binary_metrics
 from vgm_studio.model.validator import Validator
 from vgm_studio.trainer import registry
@@ -221,13 +222,13 @@ class Worker:
         self._check_parent()
         registry.report(self.store, "training", epoch=epoch, epochs=epochs, message="training")
 
-    def _warm_start(self) -> dict[str, Any] | None:
+    def _warm_start(self) -> Checkpoint | None:
         """The active version's checkpoint, else the newest version's, else None."""
         models = registry.list_models(self.store)
         chosen = next((m for m in models if m.active), models[-1] if models else None)
         if chosen is None:
             return None
-        return torch.load(chosen.path, map_location="cpu", weights_only=True)
+        return load_checkpoint(chosen.path)
 
     def _compare(self, data: TrainingSet, result: FitResult) -> dict[str, Any]:
         """Promote unless the active model is more accurate on the same held-out edges.

@@ -11,7 +11,7 @@ import numpy as np
 from vgm_studio.core import se2
 from vgm_studio.errors import InputError
 from vgm_studio.matching.edge_scans import EdgeScans
-from vgm_studio.matching.edges import Edge
+from vgm_studio.matching.edges import Edge, read_edges
 from vgm_studio.vgm.grid import pair_map
 from vgm_studio.vgm.render import Caption, draw_pair
 
@@ -77,3 +77,34 @@ def edge_picture(
             png, "cannot write the picture (is the suffix .png and the folder writable?)"
         )
     return img
+
+
+def draw_edge(
+    edges_file: Path,
+    edge_id: str,
+    png: Path,
+    *,
+    use_guess: bool = False,
+    size: int = 400,
+    resolution: float = 0.05,
+    sigma: float = 0.02,
+) -> None:
+    """Draws the edge of ``edges_file`` whose id is or starts with ``edge_id`` to ``png``.
+
+    Raises:
+        InputError: No edge, or several, with that id.
+    """
+    edges = read_edges(edges_file)
+    hits = [e for e in edges if e.edge_id.startswith(edge_id)]
+    if len(hits) != 1:
+        what = "no edge" if not hits else f"{len(hits)} edges"
+        raise InputError(edges_file, f"{what} with id {edge_id!r}")
+    edge_picture(
+        hits[0],
+        png,
+        use_guess=use_guess,
+        size=size,
+        resolution=resolution,
+        sigma=sigma,
+        search_dirs=(edges_file.parent,),
+    )

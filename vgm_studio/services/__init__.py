@@ -1,0 +1,18 @@
+"""What each command does, as one call: the layer between the command line and the stages.
+
+The command line (``tools/``) parses, calls one function here and prints what comes back;
+these functions read, run the stages and write, and tell what they did through a ``say``
+callback (progress, results) and a ``warn`` one (what went amiss but did not stop them).
+"""
+
+from collections.abc import Callable
+
+Say = Callable[[str], None]
+
+
+def quiet(_line: str) -> None:
+    """A ``say`` or ``warn`` that tells nobody."""
+    return None
+
+
+__all__ = ["Say", "quiet"]

@@ -1,0 +1,36 @@
+"""``vgm-studio info``: what a log (or a relations file) holds."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from vgm_studio.datasets import ReadOptions, open_log
+from vgm_studio.datasets.relations import looks_like_relations, read_relations
+from vgm_studio.datasets.source import skipped_lines
+from vgm_studio.datasets.summary import format_summary, summarize
+from vgm_studio.services import Say, quiet
+
+
+def describe(path: Path, read: ReadOptions, as_json: bool = False, warn: Say = quiet) -> str:
+    """A log's scans, beams, field of view, duration, poses and distance, as text or JSON."""
+    if path.is_file() and looks_like_relations(path):
+        relations = read_relations(path)
+        stamps = {r.t_a for r in relations} | {r.t_b for r in relations}
+        if as_json:
+            doc = {
+                "path": str(path),
+                "format": "relations",
+                "relations": len(relations),
+                "timestamps": len(stamps),
+            }
+            return json.dumps(doc, indent=2)
+        return (
+            f"{path}: Freiburg relations file, {len(relations)} relations "
+            f"between {len(stamps)} scan timestamps"
+        )
+    log = open_log(path, read)
+    for line in skipped_lines(log):
+        warn(line)
+    summary = summarize(log)
+    return json.dumps(summary, indent=2) if as_json else format_summary(summary)

@@ -1,0 +1,123 @@
+"""``vgm-studio slam``: a whole graph-SLAM run with its maps, figures and recording written."""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from vgm_studio.datasets import ReadOptions
+from vgm_studio.datasets.source import JoinOptions, LogSource, read_slam_source
+from vgm_studio.errors import InputError
+from vgm_studio.graph.metrics import RelationErrors
+from vgm_studio.maps.png import write_maps
+from vgm_studio.model.registry import BUNDLED_MODEL, VALIDATOR_MODELS
+from vgm_studio.recording import write_recording
+from vgm_studio.services import Say, quiet
+from vgm_studio.slam.config import SlamConfig
+from vgm_studio.slam.pipeline import SlamResult, run_slam
+from vgm_studio.slam.report import edge_line, errors_of, run_maps, summary, table
+
+
+@dataclass(frozen=True)
+class SlamOutputs:
+    """What a run writes besides its lines.
+
+    Attributes:
+        json: The run's figures as JSON.
+        maps: A folder for the odometry, before and after maps (and all three) as PNG.
+        record: A rerun recording.
+        spawn: Open the rerun viewer on the run.
+    """
+
+    json: Path | None = None
+    maps: Path | None = None
+    record: Path | None = None
+    spawn: bool = False
+
+
+def validator_model(validator: str, model: Path | None) -> Path | None:
+    """The checkpoint a validator uses: the one given, the bundled one for ``vgmnet``.
+
+    Raises:
+        InputError: Another model validator without ``--model``.
+    """
+    if validator not in VALIDATOR_MODELS or model is not None:
+        return model
+    if validator != "vgmnet":
+        raise InputError(
+            None,
+            f"--validator {validator} needs --model, a checkpoint made by "
+            f"vgm-studio train --model {validator}",
+        )
+    return BUNDLED_MODEL
+
+
+def run_slam_command(
+    log: Path,
+    read: ReadOptions,
+    config: SlamConfig,
+    *,
+    reference: Path | None = None,
+    relations: Path | None = None,
+    join: JoinOptions | None = None,
+    outputs: SlamOutputs | None = None,
+    say: Say = quiet,
+    warn: Say = quiet,
+) -> None:
+    """Reads the log, runs SLAM, scores it against relations and writes what ``outputs`` asks.
+
+    Raises:
+        InputError: The inputs cannot be read or an output cannot be written.
+    """
+    start = time.perf_counter()
+    outputs = outputs or SlamOutputs()
+    source = read_slam_source(log, read, reference, relations, join)
+    for line in source.warnings:
+        warn(line)
+    result = run_slam(source.log, config)
+    say(edge_line(result))
+    errors = errors_of(result, source.relations) if source.relations is not None else None
+    if errors is not None:
+        say(table(errors))
+    _write_outputs(source, result, errors, config, outputs, say)
+    seconds = time.perf_counter() - start
+    if outputs.json is not None:
+        settings = json.loads(json.dumps(asdict(config), default=str))
+        _write_json(outputs.json, summary(result, errors, settings, seconds))
+        say(f"wrote {outputs.json}")
+    say(f"done in {seconds:.1f} s")
+
+
+def _write_outputs(
+    source: LogSource,
+    result: SlamResult,
+    errors: dict[str, RelationErrors] | None,
+    config: SlamConfig,
+    outputs: SlamOutputs,
+    say: Say,
+) -> None:
+    """The maps and the recording, each timed into the run's seconds."""
+    maps = None
+    if outputs.maps is not None or outputs.record is not None or outputs.spawn:
+        t = time.perf_counter()
+        maps = run_maps(source.log, result, config.maps)
+        result.seconds["maps"] = time.perf_counter() - t
+    if outputs.maps is not None and maps is not None:
+        for path in write_maps(outputs.maps, maps):
+            say(f"wrote {path}")
+    if outputs.record is not None or outputs.spawn:
+        t = time.perf_counter()
+        write_recording(source.log, result, maps or {}, errors, outputs.record, outputs.spawn)
+        result.seconds["recording"] = time.perf_counter() - t
+        if outputs.record is not None:
+            say(f"wrote {outputs.record}")
+
+
+def _write_json(path: Path, doc: dict[str, Any]) -> None:
+    try:
+        path.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    except OSError as exc:
+        raise InputError(path, f"cannot write ({exc.strerror or exc})") from None

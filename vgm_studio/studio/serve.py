@@ -1,0 +1,130 @@
+"""Serving a workspace: the studio, the model's predictions and the trainer beside it.
+
+``serve`` is what ``vgm-studio label`` and ``demo`` run once the workspace is filled: it starts
+the studio, makes the model's predictions in the background (the annotator can start at once),
+starts the background trainer and the watcher that brings its versions to the tabs, and
+serves until Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from vgm_studio.errors import InputError
+from vgm_studio.labels.store import LabelStore
+from vgm_studio.studio.app import Studio, StudioConfig
+from vgm_studio.studio.panel import trainer_text
+from vgm_studio.trainer import PromotionWatcher, TrainerSupervisor, request_training
+from vgm_studio.workspace import predict_workspace
+
+EXPOSED = (
+    "viser has no authentication: anyone who can reach {host}:{port} can read and change "
+    "these labels. Listen on 127.0.0.1 (the default) unless the network is trusted."
+)
+KEYS = "  keys: S success · F failure · D skip · Z undo · Q previous · E next · G guess"
+
+
+@dataclass
+class TrainerOptions:
+    """The background trainer beside the studio (see ``vgm_studio.trainer``)."""
+
+    retrain_every: int = 25
+    base: list[Path] = field(default_factory=list)
+
+    @classmethod
+    def checked(cls, retrain_every: int, base: list[Path] | None) -> TrainerOptions:
+        """Checks the base files now: one missing would crash the trainer over and over.
+
+        Raises:
+            InputError: A base file is missing.
+        """
+        for path in base or []:
+            if not path.is_file():
+                raise InputError(path, "no such --base edges file")
+        return cls(retrain_every, [p.resolve() for p in base or []])
+
+
+def _say(line: str) -> None:
+    print(line, flush=True)
+
+
+def _warn(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def _start_trainer(studio: Studio, options: TrainerOptions) -> Callable[[], None]:
+    """Starts the trainer process and the watcher that brings its versions to the app.
+
+    Returns:
+        A function that stops both.
+    """
+    supervisor = TrainerSupervisor(studio.store.workspace, options.retrain_every, options.base)
+    watcher = PromotionWatcher(
+        studio.store,
+        on_promote=lambda _name: studio.refresh_predictions(),
+        on_status=lambda status: studio.show_trainer(trainer_text(status)),
+    )
+    supervisor.start()
+    watcher.start()
+
+    def stop() -> None:
+        watcher.stop()
+        supervisor.stop()
+
+    return stop
+
+
+def _predict_then_refresh(studio: Studio, model: Path) -> None:
+    try:
+        predict_workspace(studio.store, model)
+    except Exception as exc:  # a failed model must not take the labeling down
+        _warn(f"{model}: no predictions ({exc})")
+        return
+    studio.refresh_predictions()
+
+
+def serve(
+    store: LabelStore,
+    config: StudioConfig,
+    *,
+    model: Path | None = None,
+    trainer: TrainerOptions | None = None,
+    ready_seconds: float | None = None,
+) -> None:
+    """Starts the studio (and the trainer beside it), says where, and serves until Ctrl-C.
+
+    The model's predictions are made in the background: the annotator can start at once, and
+    p(success) appears in the panel when they are ready.
+    """
+
+    def train_now() -> None:
+        request_training(store)
+
+    studio = Studio(store, config, train_now=train_now if trainer is not None else None)
+    studio.start()
+    stop_trainer = _start_trainer(studio, trainer) if trainer is not None else None
+    if model is not None:
+        threading.Thread(
+            target=_predict_then_refresh, args=(studio, model), daemon=True, name="predict"
+        ).start()
+    when = f" (ready {ready_seconds:.1f} s after start)" if ready_seconds is not None else ""
+    _say(f"VGM Studio: {store.count_edges()} edges at {studio.url}{when}")
+    _say(KEYS)
+    if config.host not in ("127.0.0.1", "localhost", "::1"):
+        _warn("  warning: " + EXPOSED.format(host=config.host, port=config.port))
+    _say("  Ctrl-C stops; every label is already saved.")
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        _say("stopped; labels are in " + str(store.path))
+    finally:
+        if stop_trainer is not None:
+            stop_trainer()
+        studio.stop()
+        store.close()

@@ -1,0 +1,247 @@
+"""The command line's shared options: value checks, path checks, and option types declared once.
+
+Every command takes its options from here, so an option means the same in every command and is
+checked the same way. Read options (how a log is read) are added to a command whole by
+``with_read_options``; the command receives them as one ``ReadOptions``.
+"""
+
+from __future__ import annotations
+
+import functools
+import inspect
+import math
+import os
+import tempfile
+from collections.abc import Callable, Sequence
+from enum import Enum
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from vgm_studio.datasets import ReadOptions
+from vgm_studio.errors import InputError
+
+
+def number(
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    lo_open: bool = False,
+    optional: bool = False,
+) -> Callable[[Any], Any]:
+    """A typer callback: the value must be finite and within [lo, hi] ((lo, hi] when lo_open).
+
+    click's own ranges let ``nan`` and ``inf`` through (nan compares false with every bound),
+    and a non-finite threshold quietly turns every comparison downstream into nonsense.
+    """
+
+    def check(value: Any) -> Any:
+        if value is None and optional:
+            return value
+        if not math.isfinite(value):
+            raise typer.BadParameter(f"{value} is not a finite number.")
+        if lo is not None and (value <= lo if lo_open else value < lo):
+            sign = ">" if lo_open else "≥"
+            raise typer.BadParameter(f"{value:g} is out of range: it must be {sign} {lo:g}.")
+        if hi is not None and value > hi:
+            raise typer.BadParameter(f"{value:g} is out of range: it must be ≤ {hi:g}.")
+        return value
+
+    return check
+
+
+def positive(what: str) -> Any:
+    """An option whose value must be a finite number > 0."""
+    return typer.Option(help=what, callback=number(0, lo_open=True))
+
+
+def non_negative(what: str) -> Any:
+    """An option whose value must be a finite number ≥ 0."""
+    return typer.Option(help=what, callback=number(0))
+
+
+def one_of(names: Sequence[str], what: str) -> Any:
+    """An option whose value is one of ``names`` (a registry's list), shown in ``--help``."""
+
+    def check(value: Any) -> Any:
+        if value not in names:
+            raise typer.BadParameter(f"{value!r} is not one of {', '.join(names)}.")
+        return value
+
+    return typer.Option(help=what, metavar="[" + "|".join(names) + "]", callback=check)
+
+
+def writable_file(path: Path) -> None:
+    """Fails now, before minutes of work, if ``path`` cannot be written.
+
+    Raises:
+        InputError: ``path`` is a folder, or its folder cannot be made or written.
+    """
+    if path.is_dir():
+        raise InputError(path, "is a folder; give a file name to write")
+    _probe(path.parent, f".{path.name}.", path)
+
+
+def writable_folder(path: Path) -> None:
+    """Fails now if ``path`` cannot be a folder to write files into.
+
+    Raises:
+        InputError: ``path`` is a file, or cannot be made or written.
+    """
+    if path.exists() and not path.is_dir():
+        raise InputError(path, "is a file, not a folder; --out takes a folder")
+    _probe(path, ".vgm-studio.", path)
+
+
+def _probe(folder: Path, prefix: str, named: Path) -> None:
+    """Makes ``folder`` and writes a file in it, or says (of ``named``) why not."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=prefix, dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise InputError(named, f"cannot write here ({exc.strerror or exc})") from None
+
+
+def png_file(value: Any) -> Any:
+    """A typer callback: a picture to write must be a ``.png`` file name."""
+    if value.is_dir():
+        raise typer.BadParameter(f"{value} is a folder; give a .png file name.")
+    if value.suffix.lower() != ".png":
+        raise typer.BadParameter(f"{value} must end in .png (pictures are written as PNG).")
+    return value
+
+
+class Poses(str, Enum):
+    auto = "auto"
+    odometry = "odometry"
+    reference = "reference"
+
+
+class Laser(str, Enum):
+    front = "front"
+    rear = "rear"
+
+
+class Device(str, Enum):
+    auto = "auto"
+    cpu = "cpu"
+    cuda = "cuda"
+
+
+LogArg = Annotated[
+    Path, typer.Argument(metavar="LOG", help="CARMEN log, ROS 1 .bag or ROS 2 bag folder.")
+]
+FovOpt = Annotated[
+    float,
+    typer.Option(
+        "--fov",
+        help="FLASER field of view in degrees, in (0, 360].",
+        callback=number(0, 360, lo_open=True),
+    ),
+]
+TimeToleranceOpt = Annotated[
+    float,
+    typer.Option(
+        help="Reference timestamps match within this many seconds, in (0, 10].",
+        callback=number(0, 10, lo_open=True),
+    ),
+]
+MaxLoopsOpt = Annotated[int, typer.Option("--max", help="Loop candidates at most.", min=1)]
+SeedOpt = Annotated[int, typer.Option(help="Random seed.", min=0)]
+WorkspaceOpt = Annotated[Path, typer.Option(metavar="DIR", help="Workspace folder (label store).")]
+DeviceOpt = Annotated[Device, typer.Option(help="auto takes a GPU when there is one.")]
+PortOpt = Annotated[int, typer.Option(help="TCP port.", min=1, max=65535)]
+HostOpt = Annotated[
+    str, typer.Option(help="Interface to listen on; anything but 127.0.0.1 exposes the labels.")
+]
+AnnotatorOpt = Annotated[
+    str | None, typer.Option(help="Your name on the labels.", show_default="your login")
+]
+NoTrainerOpt = Annotated[
+    bool, typer.Option("--no-trainer", help="Run no background trainer beside the studio.")
+]
+RetrainOpt = Annotated[
+    int, typer.Option(help="The trainer trains after this many new labels.", min=1)
+]
+
+# The read options, in the order ``--help`` shows them; ``with_read_options`` adds them.
+_READ_PARAMETERS: tuple[tuple[str, Any, Any], ...] = (
+    (
+        "poses",
+        Annotated[
+            Poses,
+            typer.Option(
+                help="What the scans' pose fields hold "
+                "(auto: GMapping output → reference, else odometry)."
+            ),
+        ],
+        Poses.auto,
+    ),
+    ("fov", FovOpt, 180.0),
+    (
+        "max_range",
+        Annotated[
+            float | None,
+            typer.Option(
+                help="Readings at or beyond this (m, > 0) are no-returns.",
+                show_default="the message's, or 95% of the log's largest reading",
+                callback=number(0, lo_open=True, optional=True),
+            ),
+        ],
+        None,
+    ),
+    (
+        "laser",
+        Annotated[Laser, typer.Option(help="front: FLASER/ROBOTLASER1; rear: RLASER.")],
+        Laser.front,
+    ),
+    (
+        "skip_bad_lines",
+        Annotated[bool, typer.Option(help="Skip malformed lines and report how many.")],
+        False,
+    ),
+    ("scan_topic", Annotated[str | None, typer.Option(help="ROS bags: LaserScan topic.")], None),
+    ("odom_topic", Annotated[str | None, typer.Option(help="ROS bags: Odometry topic.")], None),
+)
+
+
+def _read_options(values: dict[str, Any]) -> ReadOptions:
+    return ReadOptions(
+        poses=values["poses"].value,
+        fov_deg=values["fov"],
+        max_range=values["max_range"],
+        laser=values["laser"].value,
+        skip_bad_lines=values["skip_bad_lines"],
+        scan_topic=values["scan_topic"],
+        odom_topic=values["odom_topic"],
+    )
+
+
+def with_read_options(command: Callable[..., None]) -> Callable[..., None]:
+    """Gives a command the read options; it takes them as one parameter ``read: ReadOptions``.
+
+    Example:
+        >>> @with_read_options
+        ... def info(log: LogArg, read: ReadOptions) -> None: ...
+    """
+    names = [name for name, _, _ in _READ_PARAMETERS]
+    signature = inspect.signature(command, eval_str=True)
+    kept = [p for p in signature.parameters.values() if p.name != "read"]
+    added = [
+        inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default, annotation=kind)
+        for name, kind, default in _READ_PARAMETERS
+    ]
+
+    @functools.wraps(command)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        read = _read_options({name: kwargs.pop(name) for name in names})
+        return command(*args, read=read, **kwargs)
+
+    params = [p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for p in kept] + added
+    wrapper.__signature__ = signature.replace(parameters=params)  # type: ignore[attr-defined]
+    wrapper.__annotations__ = {p.name: p.annotation for p in params} | {"return": None}
+    del wrapper.__wrapped__
+    return wrapper

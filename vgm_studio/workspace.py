@@ -1,0 +1,164 @@
+"""A workspace's edges and predictions: filled from a log or an edges file, scored by a model.
+
+A workspace is a folder with a label store (``labels/``). Filling it makes a log's candidate
+edges once (a source is known by its content, not its path); predicting stores a model's
+p(success) for every edge, unless the workspace's own trainer has versions of its own.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from vgm_studio.core.hashing import content_hash
+from vgm_studio.datasets import ReadOptions
+from vgm_studio.datasets.source import JoinOptions, read_source
+from vgm_studio.errors import InputError, require_utf8_path
+from vgm_studio.labels.store import LabelStore
+from vgm_studio.matching.candidates import CandidateConfig, make_candidates
+from vgm_studio.matching.edge_scans import check_viewable
+from vgm_studio.matching.edges import read_edge_rows
+from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.model.checkpoint import load_checkpoint
+from vgm_studio.model.registry import BUNDLED_MODEL
+from vgm_studio.model.validator import Validator
+from vgm_studio.trainer.registry import list_models
+
+REPO = Path(__file__).resolve().parents[1]
+DEMO_LOG = REPO / "datasets" / "demo-seed0.log"
+# Enough loop candidates to label for a while, few enough that the demo serves within seconds.
+DEMO_LOOPS = 600
+
+Say = Callable[[str], None]
+
+
+def _quiet(_line: str) -> None:
+    return None
+
+
+def source_key(source: Path, reference: Path | None) -> str:
+    """What a source is known by in the store: its content, and the reference's path."""
+    return f"{content_hash(source)}:{reference.resolve() if reference else ''}"
+
+
+def fill_workspace(
+    store: LabelStore,
+    source: Path,
+    reference: Path | None,
+    options: ReadOptions,
+    max_loops: int = 2000,
+    time_offset: float = 0.0,
+    *,
+    say: Say = _quiet,
+    warn: Say = _quiet,
+) -> int:
+    """Adds a log's candidate edges (made now, once per log) or an edges file to the store.
+
+    Args:
+        store: The workspace's store.
+        source: A log (CARMEN, ROS bag) or an edges file (``.jsonl``).
+        reference: A log's reference: a corrected log, a TRUEPOS log or relations.
+        options: How to read the log.
+        max_loops: Loop candidates at most.
+        time_offset: Seconds added to a reference log's timestamps.
+        say: Told what is being made.
+        warn: Told what went amiss in reading.
+
+    Returns:
+        How many edges were new.
+    """
+    for path in (source, reference):
+        if path is not None:
+            require_utf8_path(path)
+    if not source.exists():
+        raise InputError(source, "no such file or folder")
+    key = source_key(source, reference)
+    if store.has_source(key):
+        return 0
+    if source.suffix.lower() == ".jsonl":
+        rows = read_edge_rows(source)
+        check_viewable(rows, source)  # before the server starts, not as a blank tab
+        edges = [edge for _, edge in rows]
+        kind = "edges"
+    else:
+        found = read_source(
+            source, options, reference, JoinOptions(time_offset=time_offset), max_loops
+        )
+        for line in found.warnings:
+            warn(line)
+        say(f"making candidate edges of {source} (once; kept in {store.workspace})")
+        edges = make_candidates(
+            found.log,
+            ScanMatcher(),
+            CandidateConfig(max_loops=max_loops),
+            relations=found.relations,
+            params=found.params,
+        )
+        kind = "log"
+    if not edges:
+        raise InputError(source, "gives no candidate edges to label")
+    return store.add_edges(edges, source=(key, str(source.resolve()), kind))
+
+
+def predict_workspace(store: LabelStore, model: Path, *, say: Say = _quiet) -> None:
+    """Stores the model's p(success) for every edge, unless this model's are there already.
+
+    A workspace whose trainer has versions keeps the active one: nothing is done then.
+    """
+    if list_models(store):
+        return
+    key = f"{model.name}:{content_hash(model)[:12]}"
+    current = store.predictions()
+    if current.model == key and len(current.p) == store.count_edges():
+        return
+    validator = Validator.load(model)
+    edges = store.edges()
+    say(f"predicting p(success) of {len(edges)} edges with {model.name}")
+    p = validator.predict(edges, progress=say is not _quiet)
+    store.set_predictions(
+        key, dict(zip((e.edge_id for e in edges), p, strict=True)), validator.threshold
+    )
+
+
+def choose_model(model: Path | None, no_model: bool = False, *, warn: Say = _quiet) -> Path | None:
+    """The model to predict with: the one named, else the bundled one; checked now.
+
+    Raises:
+        InputError: The named model is missing, or no VGM Studio checkpoint.
+    """
+    if no_model:
+        return None
+    path = model or BUNDLED_MODEL
+    if not path.is_file():
+        if model is not None:
+            raise InputError(model, "no such model file")
+        warn(f"{path}: bundled model missing; showing no predictions")
+        return None
+    load_checkpoint(path)  # refuses a foreign or damaged file before the server starts
+    return path
+
+
+def open_demo(
+    workspace: Path, *, predict: bool = False, say: Say = _quiet, warn: Say = _quiet
+) -> tuple[LabelStore, Path | None]:
+    """The demo workspace, filled from the bundled demo log; with the bundled model's
+    predictions stored when ``predict`` (else the server makes them in the background).
+
+    Returns:
+        The store and the bundled model (None when it is missing).
+
+    Raises:
+        InputError: The bundled demo log is missing.
+    """
+    if not DEMO_LOG.exists():
+        raise InputError(
+            DEMO_LOG,
+            "bundled demo log missing; remake it with: "
+            "vgm-studio simulate --out datasets --preset demo --seed 0",
+        )
+    store = LabelStore(workspace)
+    fill_workspace(store, DEMO_LOG, None, ReadOptions(), max_loops=DEMO_LOOPS, say=say, warn=warn)
+    model = choose_model(None, warn=warn)
+    if predict and model is not None:
+        predict_workspace(store, model, say=say)
+    return store, model
