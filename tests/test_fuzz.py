@@ -14,6 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from benchmarks.studio_browser import free_port
 from tests.fuzzing import (
     BYTE_OPS,
     BYTE_PAYLOADS,
@@ -31,7 +32,6 @@ from vgm_studio.datasets.relations import read_relations
 from vgm_studio.labels import LabelStore
 from vgm_studio.labels.transfer import export_labels, import_labels
 from vgm_studio.matching.edges import read_edges
-from vgm_studio.studio.browser import free_port
 
 FUZZ = settings(
     derandomize=True,

@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from benchmarks.studio_browser import free_port
 from tests.test_cli_checks import one_line_error, run
 from tests.untrusted import label_row, make_edges, write_jsonl, write_log
 from vgm_studio.datasets import open_log
@@ -18,7 +19,6 @@ from vgm_studio.errors import InputError
 from vgm_studio.labels import LabelStore
 from vgm_studio.labels.transfer import export_labels, import_labels
 from vgm_studio.matching.edges import read_edges
-from vgm_studio.studio.browser import free_port
 
 
 def _edge_line(tmp_path, **changes):

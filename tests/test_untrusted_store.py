@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 import torch
 
+from benchmarks.studio_browser import free_port
 from tests.test_cli_checks import one_line_error, run
 from tests.untrusted import label_row, make_edges, write_jsonl, write_log
 from vgm_studio.labels import LabelStore
-from vgm_studio.studio.browser import free_port
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -136,7 +136,7 @@ def test_a_host_that_is_not_this_machine_says_so(tmp_path):
         ({"vgm": {"size": "x", "resolution": 0.05, "sigma": 0.02}}, "vgm.size: Input should be"),
         ({"vgm": {"size": 400}}, "vgm.resolution: missing"),
         ({"threshold": float("nan")}, "threshold: must be a finite number"),
-        ({"model": "evil"}, "model: Input should be"),
+        ({"model": "evil"}, "model: unknown model (expected one of vgmnet,"),
     ],
 )
 def test_a_checkpoint_with_bad_metadata_is_one_line(office_edges, tmp_path, change, expected):

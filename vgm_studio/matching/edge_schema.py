@@ -140,7 +140,7 @@ class EdgeRow(BaseModel):
 
     edge_id: Annotated[Name, Field(min_length=1, max_length=128)]
     log_path: PathText
-    log_sha256: Annotated[str, Field(max_length=MAX_TEXT_CHARS, pattern=r"^[0-9a-fA-F-]*$")] = ""
+    log_sha256: Annotated[Name, Field(max_length=MAX_TEXT_CHARS)] = ""
     a: ScanIndex
     b: ScanIndex
     timestamp_a: Finite | None = None
