@@ -207,8 +207,10 @@ def make_candidates(
     config = config or CandidateConfig()
     thresholds = thresholds or LabelThresholds()
     pairs, notes = plan_pairs(log, config, relations, progress)
+    mount = log.mount
     recorded = {
         **(params or {}),
+        "mount": None if mount is None else {**mount.to_json(), "source": log.mount_source},
         "candidates": asdict(config),
         "labels": asdict(thresholds),
         "matcher": asdict(matcher.config),
@@ -225,7 +227,9 @@ def make_candidates(
             label = reference_label(p.reference, estimate, thresholds)
         edges.append(
             Edge(
-                edge_id=edge_id(log.content_hash, p.a, p.b, estimate),
+                edge_id=edge_id(
+                    log.content_hash, p.a, p.b, estimate, "" if mount is None else mount.id_text()
+                ),
                 log_path=log_path,
                 log_sha256=log.content_hash,
                 a=p.a,
