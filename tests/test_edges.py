@@ -96,3 +96,13 @@ def test_reference_label_thresholds():
     # The error is taken in the reference frame: rotation of the frame matters.
     rotated = [0.0, 0.0, math.pi / 2]
     assert reference_label(rotated, [0.0, 0.05, math.pi / 2]) == "success"
+
+
+def test_the_edge_schema_reads_every_read_option():
+    # Edges record their ReadOptions; a field the schema lacks would refuse new edge files.
+    from dataclasses import fields
+
+    from vgm_studio.datasets.options import ReadOptions
+    from vgm_studio.matching.edge_schema import ReadParams
+
+    assert set(ReadParams.model_fields) == {f.name for f in fields(ReadOptions)}

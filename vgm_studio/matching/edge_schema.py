@@ -123,6 +123,8 @@ class ReadParams(BaseModel):
     skip_bad_lines: StrictBool = False
     scan_topic: Name | None = None
     odom_topic: Name | None = None
+    laser_pose: Annotated[list[Finite], Field(min_length=3, max_length=3)] | None = None
+    laser_flipped: StrictBool = False
 
 
 class EdgeParams(BaseModel):
