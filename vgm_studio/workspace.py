@@ -13,10 +13,11 @@ from pathlib import Path
 from vgm_studio.core.hashing import content_hash
 from vgm_studio.datasets import ReadOptions
 from vgm_studio.datasets.source import JoinOptions, read_source
-from vgm_studio.errors import InputError
+from vgm_studio.errors import InputError, require_utf8_path
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.matching.candidates import CandidateConfig, make_candidates
-from vgm_studio.matching.edges import read_edges
+from vgm_studio.matching.edge_scans import check_viewable
+from vgm_studio.matching.edges import read_edge_rows
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.model.checkpoint import load_checkpoint, precision_threshold
 from vgm_studio.model.registry import BUNDLED_MODEL
@@ -68,6 +69,9 @@ def fill_workspace(
     Returns:
         How many edges were new.
     """
+    for path in (source, reference):
+        if path is not None:
+            require_utf8_path(path)
     if not source.exists():
         raise InputError(source, "no such file or folder")
     key = source_key(source, reference)
@@ -77,7 +81,9 @@ def fill_workspace(
     if store.has_source(key):
         return 0
     if source.suffix.lower() == ".jsonl":
-        edges = read_edges(source)
+        rows = read_edge_rows(source)
+        check_viewable(rows, source)  # before the server starts, not as a blank tab
+        edges = [edge for _, edge in rows]
         kind = "edges"
     else:
         found = read_source(

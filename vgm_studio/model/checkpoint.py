@@ -19,8 +19,8 @@ import torch
 
 from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.errors import InputError
+from vgm_studio.model.checkpoint_schema import parse_checkpoint_meta
 from vgm_studio.model.operating import PrecisionCurve, threshold_for_precision
-from vgm_studio.model.registry import MODEL_NAMES
 from vgm_studio.vgm.grid import VGMParams
 
 FORMAT = "vgm-studio-model/1"
@@ -121,8 +121,7 @@ def load_checkpoint(path: Path, expect_vgm: VGMParams | None = None) -> Checkpoi
         raise InputError(path, f"not a readable model checkpoint ({type(exc).__name__})") from None
     if not isinstance(content, dict) or content.get("format") != FORMAT:
         raise InputError(path, f"not a VGM Studio model (expected format {FORMAT})")
-    if content.get("model") not in MODEL_NAMES:
-        raise InputError(path, f"unknown model {content.get('model')!r}")
+    parse_checkpoint_meta(content, path)  # types and ranges, before anything reads them
     checkpoint = Checkpoint.from_dict(content)
     vgm = checkpoint.vgm
     if expect_vgm is not None and vgm != expect_vgm:

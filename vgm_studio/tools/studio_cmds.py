@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import errno
+import socket
 import time
 from pathlib import Path
 from typing import Annotated
@@ -9,6 +11,7 @@ from typing import Annotated
 import typer
 
 from vgm_studio.datasets import ReadOptions
+from vgm_studio.errors import InputError
 from vgm_studio.tools.options import (
     AnnotatorOpt,
     HostOpt,
@@ -90,6 +93,7 @@ def label(
     from vgm_studio.workspace import choose_model, fill_workspace
 
     start = time.perf_counter()
+    check_host(host)
     check_port_free(host, port)
     store = LabelStore(workspace or Path(f"{source.stem}.studio"))
     before = store.count_edges()
@@ -116,6 +120,28 @@ def label(
     )
 
 
+def check_host(host: str) -> None:
+    """Refuses a ``--host`` that is not a name or address of this machine, in those words.
+
+    Raises:
+        InputError: The name does not resolve, or no interface of this machine has it.
+    """
+    try:
+        family, kind, _, _, address = socket.getaddrinfo(host, 0, type=socket.SOCK_STREAM)[0]
+    except (socket.gaierror, UnicodeError):
+        raise InputError(f"--host {host}", "is not a name or address that resolves") from None
+    with socket.socket(family, kind) as probe:
+        try:
+            probe.bind(address)
+        except OSError as exc:
+            if exc.errno == errno.EADDRNOTAVAIL:
+                raise InputError(
+                    f"--host {host}",
+                    "is not an address of this machine; listen on 127.0.0.1 (this machine "
+                    "only), 0.0.0.0 (every interface) or one of this machine's addresses",
+                ) from None
+
+
 def demo(
     workspace: DemoWorkspaceOpt = Path("vgm-demo"),
     port: PortOpt = 8080,
@@ -136,6 +162,7 @@ def demo(
 
     start = time.perf_counter()
     if serve_app:
+        check_host(host)
         check_port_free(host, port)
     precision = loop_precision or None
     store, model = open_demo(
