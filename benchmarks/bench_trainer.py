@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
-from _common import REPO, machine, pin_to_cores, table
+from _common import machine, pin_to_cores, table
 
 if TYPE_CHECKING:
     from vgm_studio.labels import LabelStore
@@ -411,7 +411,8 @@ def main() -> None:
     parser.add_argument("--retrain-every", type=int, default=25)
     parser.add_argument("--preset", default="loop", help="Simulated corridor world.")
     parser.add_argument("--orders", default="log,uncertain")
-    parser.add_argument("--plot", type=Path, default=REPO / "assets/readme/trainer-curves.png")
+    # No default: the README's picture is tracked and is replaced only when asked for.
+    parser.add_argument("--plot", type=Path, help="Draw the curves here (PNG).")
     parser.add_argument("--keep", type=Path, help="Keep the workspaces and logs here.")
     parser.add_argument("--results", type=Path, help="Also write the figures as JSON here.")
     args = parser.parse_args()
@@ -430,10 +431,11 @@ def main() -> None:
             print(f"labeling in {ORDERS[order]} order …", flush=True)
             runs.append(run_order(order, edges, work, args))
         report(runs, args, counts)
-        plot(runs, args.plot, args.labels)
         if args.results:
             save(runs, args.results)
-        print(f"\nwrote {args.plot}")
+        if args.plot:
+            plot(runs, args.plot, args.labels)
+            print(f"\nwrote {args.plot}")
 
 
 if __name__ == "__main__":

@@ -58,7 +58,7 @@ def test_round_trip(tmp_path):
     ("text", "message"),
     [
         ("{not json", "not JSON"),
-        ('{"edge_id": "x"}', "edge lacks"),
+        ('{"edge_id": "x"}', "log_path: missing"),
         ("[1, 2]", "must be a JSON object"),
     ],
 )
@@ -73,8 +73,8 @@ def test_malformed_edges_name_line(tmp_path, text, message):
 def test_bad_field_values(tmp_path):
     path = tmp_path / "e.jsonl"
     for field, value, message in [
-        ("kind", "weird", "unknown kind"),
-        ("label", "maybe", "unknown label"),
+        ("kind", "weird", "kind: Input should be 'sequential' or 'loop'"),
+        ("label", "maybe", "label: Input should be 'success', 'failure' or 'ambiguous'"),
         ("guess", [1, 2], "three finite numbers"),
     ]:
         obj = make_edge().to_json()
@@ -96,3 +96,13 @@ def test_reference_label_thresholds():
     # The error is taken in the reference frame: rotation of the frame matters.
     rotated = [0.0, 0.0, math.pi / 2]
     assert reference_label(rotated, [0.0, 0.05, math.pi / 2]) == "success"
+
+
+def test_the_edge_schema_reads_every_read_option():
+    # Edges record their ReadOptions; a field the schema lacks would refuse new edge files.
+    from dataclasses import fields
+
+    from vgm_studio.datasets.options import ReadOptions
+    from vgm_studio.matching.edge_schema import ReadParams
+
+    assert set(ReadParams.model_fields) == {f.name for f in fields(ReadOptions)}

@@ -128,7 +128,7 @@ def test_a_bad_import_line_names_file_and_line_and_changes_nothing(store, tmp_pa
     fresh = LabelStore(tmp_path / "fresh")
     with pytest.raises(InputError) as err:
         import_labels(fresh, bad)
-    assert str(err.value).startswith(f"{bad}:2: label 'maybe'")
+    assert str(err.value) == f"{bad}:2: label: Input should be 'success' or 'failure'"
     assert fresh.count_edges() == 0
     txt = tmp_path / "labels.txt"
     txt.write_text(line + "\n")

@@ -176,6 +176,9 @@ def test_checkpoint_round_trip_and_refusals(sim_edges, tmp_path):
     v = Validator.load(out, expect_vgm=VGMParams())
     assert v.name == "score" and v.vgm == VGMParams()
     assert v.metrics["n"] == sum(checkpoint.training["counts"]["validation"].values())
+    curve = v.checkpoint.curve  # kept for --loop-precision
+    assert curve is not None and 1 < len(curve.thresholds) <= v.metrics["n"]
+    assert curve.recall[0] == 1.0 and curve.thresholds == sorted(curve.thresholds)
     again = Validator.load(out)
     np.testing.assert_array_equal(
         v.predict_samples(data.samples[:20]), again.predict_samples(data.samples[:20])
@@ -288,3 +291,34 @@ def test_prefolded_lifted_input_matches_network_on_raw_vgms(occupancy, spread):
     assert extra is not None and extra.shape == (3, 4 if spread else 2)
     with torch.inference_mode():
         np.testing.assert_allclose(net(x, extra).numpy(), net(raw, figs).numpy(), atol=1e-5)
+
+
+@pytest.mark.parametrize("occupancy", [False, True])
+def test_batched_cells_path_equals_dense_network(tmp_path, occupancy):
+    from vgm_studio.model.checkpoint import Checkpoint, save_checkpoint
+    from vgm_studio.model.registry import build_network
+    from vgm_studio.model.validator import Validator, input_spec
+
+    torch.manual_seed(1)
+    net, hyper = build_network("vgmnet", {"figures": True, "occupancy": occupancy})
+    # Batch norm with statistics that are not the identity, as after training.
+    for m in net.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-0.5, 0.5)
+            m.running_var.uniform_(0.5, 2.0)
+            m.weight.data.uniform_(0.5, 1.5)
+    path = tmp_path / "m.pt"
+    state = {k: v.clone() for k, v in net.state_dict().items()}
+    save_checkpoint(path, Checkpoint("vgmnet", hyper=hyper, state_dict=state))
+    samples = random_samples(70, seed=4)
+    empty = np.zeros((0, 2), np.float32)
+    samples[5] = PairSample(empty, empty, 0.0, 0.02)  # a pair with no point on the grid
+    samples[9] = PairSample(np.array([[0.3, 0.2]], np.float32), empty, 1.0, 0.0)
+    net.eval()
+    spec = input_spec("vgmnet", hyper, VGMParams())
+    x, extra = spec.tensors(samples, torch.device("cpu"))
+    with torch.inference_mode():
+        want = torch.sigmoid(net(x, extra)).numpy()
+    got = Validator.load(path, device="cpu").predict_samples(samples, batch_size=256)
+    np.testing.assert_allclose(got, want, atol=1e-5)
+    assert np.ptp(got) > 1e-3  # the pairs do differ, so the comparison says something

@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import re
 import socket
 import sqlite3
+import subprocess
+import sys
+from collections import Counter
 
 import pytest
 
 from benchmarks.studio_browser import free_port
 from tests.test_cli_checks import one_line_error, run
+from vgm_studio import __version__
 from vgm_studio.labels import LabelStore
-from vgm_studio.matching.edges import read_edges
+from vgm_studio.matching.edges import read_edges, write_edges
 
 
 def test_port_in_use_is_refused_before_serving(office_edges, tmp_path):
@@ -77,3 +82,65 @@ def test_demo_prepares_its_workspace_with_predictions(tmp_path):
     assert len(preds.p) == 977 and 0.0 < min(preds.p.values()) < max(preds.p.values()) < 1.0
     again = run("demo", "--workspace", tmp_path / "demo", "--no-serve")
     assert again.returncode == 0 and "977 edges" in again.stdout
+
+
+def _served_says(*args: object) -> list[str]:
+    """What ``vgm-studio ARGS`` prints until it serves; the server is then stopped."""
+    cmd = [sys.executable, "-m", "vgm_studio.tools.cmd", *map(str, args)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines: list[str] = []
+    try:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.append(line.rstrip("\n"))
+            if line.startswith("VGM Studio:"):
+                break
+    finally:
+        proc.kill()
+        proc.wait(timeout=30)
+    return lines
+
+
+def test_label_into_an_existing_workspace_says_what_it_added(office_edges, tmp_path):
+    edges = read_edges(office_edges)
+    first, second = tmp_path / "first.jsonl", tmp_path / "second.jsonl"
+    write_edges(first, edges[:10])
+    write_edges(second, edges[5:30])
+    ws = tmp_path / "ws"
+    common = ["--workspace", ws, "--no-model", "--no-trainer"]
+    said = _served_says("label", first, *common, "--port", free_port())
+    assert not any("added" in line for line in said)  # a new workspace: nothing to tell
+    said = _served_says("label", second, *common, "--port", free_port())
+    kinds = Counter(e.kind for e in edges[10:30])
+    which = ", ".join(f"{n} {kind}" for kind, n in sorted(kinds.items()))
+    assert f"{second}: added 20 edges ({which}) to the 10 in {ws}" in said
+    said = _served_says("label", second, *common, "--port", free_port())
+    assert any("no edges added" in line for line in said)
+
+
+def test_off_loopback_the_address_carries_a_token(office_edges, tmp_path):
+    args = ["--workspace", tmp_path / "ws", "--no-model", "--no-trainer", "--port", free_port()]
+    said = _served_says("label", office_edges, *args, "--host", "0.0.0.0")
+    served = next(line for line in said if line.startswith("VGM Studio:"))
+    assert re.search(r"http://localhost:\d+/[A-Za-z0-9_-]{16,}", served)
+    proc = run("label", office_edges, *args, "--token", "a b")
+    assert "--token" in one_line_error(proc, 2)
+
+
+def test_version_and_agreement_commands(office_edges, tmp_path):
+    proc = run("--version")
+    assert proc.returncode == 0 and proc.stdout.strip() == f"vgm-studio {__version__}"
+    store = LabelStore(tmp_path / "ws")
+    store.add_edges(read_edges(office_edges))
+    ids = store.edge_ids()
+    for i, edge in enumerate(ids[:6]):
+        store.label(edge, "ana", "success" if i % 2 else "failure")
+        store.label(edge, "bob", "success" if i < 3 else "failure")
+    store.close()
+    proc = run("agreement", "--workspace", tmp_path / "ws")
+    assert proc.returncode == 0, proc.stderr
+    header, row = proc.stdout.strip().splitlines()
+    assert "Cohen's kappa" in header
+    assert row.split()[:5] == ["ana", "·", "bob", "6", "2"]  # ana and bob agree on 2 of 6
+    proc = run("agreement", "--workspace", tmp_path / "none")
+    one_line_error(proc, 1)

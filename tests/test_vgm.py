@@ -10,6 +10,7 @@ import pytest
 from vgm_studio.core import se2
 from vgm_studio.datasets import open_log
 from vgm_studio.vgm import grid_map, pair_map
+from vgm_studio.vgm.grid import batch_cells, pair_maps
 
 
 def plain_grid_map(points, size=400, resolution=0.05, sigma=0.02):
@@ -105,3 +106,37 @@ def test_pair_map_moves_current_scan_by_estimate():
     np.testing.assert_allclose(vgm[0], vgm[1], atol=1e-6)
     rotated = pair_map(prev, np.array([[0.025, -1.025]]), [0.0, 0.0, math.pi / 2])
     np.testing.assert_allclose(rotated[1], vgm[0], atol=1e-5)
+
+
+def _simulated_scans(tmp_path, count):
+    from vgm_studio.simulation.simulate import SimConfig, simulate
+
+    log = open_log(simulate(SimConfig(preset="office", seed=3, laps=0.2), tmp_path))
+    return [s.points() for s in log.scans[:count]]
+
+
+def test_batched_pair_maps_equal_each_pair_alone(tmp_path):
+    rng = np.random.default_rng(7)
+    sim = _simulated_scans(tmp_path, 4)
+    # Random clouds, simulated scans, an empty scan, one lone point (a single-point cell and
+    # n_max = 1) and a scan wholly outside the grid: each channel keeps its own n_max.
+    prevs = [rng.normal(0, 3, (250, 2)), sim[0], np.zeros((0, 2)), sim[2], [[50.0, 0.0]]]
+    curs = [sim[1], rng.normal(0, 0.05, (40, 2)), sim[3], [[0.33, -1.2]], np.zeros((0, 2))]
+    estimates = [[0.1, -0.2, 0.3], [0.0, 0.0, 0.0], [1.0, 2.0, -1.0], [0.5, 0.5, 2.0], [0, 0, 1]]
+    batched = pair_maps(prevs, curs, estimates)
+    assert batched.shape == (5, 2, 400, 400)
+    for k in range(5):
+        alone = pair_map(prevs[k], curs[k], estimates[k])
+        np.testing.assert_allclose(batched[k], alone, rtol=1e-6, atol=1e-7)
+        want = plain_grid_map(se2.transform_points(estimates[k], np.reshape(curs[k], (-1, 2))))
+        np.testing.assert_allclose(batched[k, 1], want, atol=1e-5)
+    assert not batched[2, 0].any() and not batched[4].any()
+    assert np.count_nonzero(batched[3, 1]) == 1 and np.count_nonzero(batched[0, 0]) > 100
+
+
+def test_batch_cells_sorted_by_channel_with_empty_channels_left_out():
+    channel, cell, value = batch_cells([np.zeros((0, 2)), [[0.01, 0.01]], np.zeros((0, 2))])
+    assert channel.tolist() == [1] and cell.tolist() == [200 * 400 + 200]
+    assert value[0] == pytest.approx(grid_map([[0.01, 0.01]])[200, 200])
+    none = batch_cells([])
+    assert all(len(a) == 0 for a in none)

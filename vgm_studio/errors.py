@@ -26,6 +26,22 @@ class InputError(Exception):
         return f"{where}: {self.message}" if where else self.message
 
 
+def require_utf8_path(path: str | Path) -> None:
+    """Refuses a path that is not UTF-8 text (a stray byte from another system's encoding).
+
+    Such a path cannot be written into an edges file, the label store or a message intact.
+
+    Raises:
+        InputError: Naming the path with the stray bytes shown as escapes.
+    """
+    text = str(path)
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        shown = text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+        raise InputError(shown, "the path is not UTF-8 text; rename it") from None
+
+
 def exit_on_error(prog: str, body: Callable[[], object]) -> None:
     """Runs a process's body; an expected error ends it with one line and an exit code.
 

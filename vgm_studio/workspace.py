@@ -13,12 +13,13 @@ from pathlib import Path
 from vgm_studio.core.hashing import content_hash
 from vgm_studio.datasets import ReadOptions
 from vgm_studio.datasets.source import JoinOptions, read_source
-from vgm_studio.errors import InputError
+from vgm_studio.errors import InputError, require_utf8_path
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.matching.candidates import CandidateConfig, make_candidates
-from vgm_studio.matching.edges import read_edges
+from vgm_studio.matching.edge_scans import check_viewable
+from vgm_studio.matching.edges import read_edge_rows
 from vgm_studio.matching.matcher import ScanMatcher
-from vgm_studio.model.checkpoint import load_checkpoint
+from vgm_studio.model.checkpoint import load_checkpoint, precision_threshold
 from vgm_studio.model.registry import BUNDLED_MODEL
 from vgm_studio.model.validator import Validator
 from vgm_studio.trainer.registry import list_models
@@ -48,6 +49,7 @@ def fill_workspace(
     max_loops: int = 2000,
     time_offset: float = 0.0,
     *,
+    time_tolerance: float = JoinOptions.time_tolerance,
     say: Say = _quiet,
     warn: Say = _quiet,
 ) -> int:
@@ -60,12 +62,16 @@ def fill_workspace(
         options: How to read the log.
         max_loops: Loop candidates at most.
         time_offset: Seconds added to a reference log's timestamps.
+        time_tolerance: Reference timestamps match within this many seconds.
         say: Told what is being made.
         warn: Told what went amiss in reading.
 
     Returns:
         How many edges were new.
     """
+    for path in (source, reference):
+        if path is not None:
+            require_utf8_path(path)
     if not source.exists():
         raise InputError(source, "no such file or folder")
     key = source_key(source, reference)
@@ -75,11 +81,13 @@ def fill_workspace(
     if store.has_source(key):
         return 0
     if source.suffix.lower() == ".jsonl":
-        edges = read_edges(source)
+        rows = read_edge_rows(source)
+        check_viewable(rows, source)  # before the server starts, not as a blank tab
+        edges = [edge for _, edge in rows]
         kind = "edges"
     else:
         found = read_source(
-            source, options, reference, JoinOptions(time_offset=time_offset), max_loops
+            source, options, reference, JoinOptions(time_tolerance, time_offset), max_loops
         )
         for line in found.warnings:
             warn(line)
@@ -97,31 +105,46 @@ def fill_workspace(
     return store.add_edges(edges, source=(key, str(source.resolve()), kind))
 
 
-def predict_workspace(store: LabelStore, model: Path, *, say: Say = _quiet) -> None:
+def predict_workspace(
+    store: LabelStore, model: Path, *, precision: float | None = None, say: Say = _quiet
+) -> None:
     """Stores the model's p(success) for every edge, unless this model's are there already.
 
-    A workspace whose trainer has versions keeps the active one: nothing is done then.
+    The studio's decisions (what the model says, the "model disagrees" queue) use the
+    checkpoint's threshold, or with ``precision`` the lowest cut whose validation precision
+    reaches it. A workspace whose trainer has versions keeps the active one: nothing is done
+    then.
     """
     if list_models(store):
         return
     key = f"{model.name}:{content_hash(model)[:12]}"
+    if precision is not None:
+        key += f"@precision{precision:g}"
     current = store.predictions()
     if current.model == key and len(current.p) == store.count_edges():
         return
     validator = Validator.load(model)
     edges = store.edges()
     say(f"predicting p(success) of {len(edges)} edges with {model.name}")
+    threshold = validator.threshold
+    if precision is not None:
+        threshold = validator.threshold_at_precision(precision)
     p = validator.predict(edges, progress=say is not _quiet)
-    store.set_predictions(
-        key, dict(zip((e.edge_id for e in edges), p, strict=True)), validator.threshold
-    )
+    store.set_predictions(key, dict(zip((e.edge_id for e in edges), p, strict=True)), threshold)
 
 
-def choose_model(model: Path | None, no_model: bool = False, *, warn: Say = _quiet) -> Path | None:
+def choose_model(
+    model: Path | None,
+    no_model: bool = False,
+    *,
+    precision: float | None = None,
+    warn: Say = _quiet,
+) -> Path | None:
     """The model to predict with: the one named, else the bundled one; checked now.
 
     Raises:
-        InputError: The named model is missing, or no VGM Studio checkpoint.
+        InputError: The named model is missing, or no VGM Studio checkpoint, or
+            ``precision`` is asked for and its validation curve cannot give it.
     """
     if no_model:
         return None
@@ -131,12 +154,19 @@ def choose_model(model: Path | None, no_model: bool = False, *, warn: Say = _qui
             raise InputError(model, "no such model file")
         warn(f"{path}: bundled model missing; showing no predictions")
         return None
-    load_checkpoint(path)  # refuses a foreign or damaged file before the server starts
+    checkpoint = load_checkpoint(path)  # refuses a foreign or damaged file before serving
+    if precision is not None:
+        precision_threshold(checkpoint, precision, path)
     return path
 
 
 def open_demo(
-    workspace: Path, *, predict: bool = False, say: Say = _quiet, warn: Say = _quiet
+    workspace: Path,
+    *,
+    predict: bool = False,
+    precision: float | None = None,
+    say: Say = _quiet,
+    warn: Say = _quiet,
 ) -> tuple[LabelStore, Path | None]:
     """The demo workspace, filled from the bundled demo log; with the bundled model's
     predictions stored when ``predict`` (else the server makes them in the background).
@@ -155,7 +185,7 @@ def open_demo(
         )
     store = LabelStore(workspace)
     fill_workspace(store, DEMO_LOG, None, ReadOptions(), max_loops=DEMO_LOOPS, say=say, warn=warn)
-    model = choose_model(None, warn=warn)
+    model = choose_model(None, precision=precision, warn=warn)
     if predict and model is not None:
-        predict_workspace(store, model, say=say)
+        predict_workspace(store, model, precision=precision, say=say)
     return store, model

@@ -8,7 +8,7 @@ from vgm_studio.datasets.carmen import read_carmen
 from vgm_studio.datasets.mount import mount_from_options, with_mount
 from vgm_studio.datasets.options import ReadOptions
 from vgm_studio.datasets.scans import Scan, ScanLog
-from vgm_studio.errors import InputError
+from vgm_studio.errors import InputError, require_utf8_path
 
 __all__ = ["ReadOptions", "Scan", "ScanLog", "open_log"]
 
@@ -21,6 +21,7 @@ def open_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
     they move to the base with the mount and the world stays where the log put it.
     """
     path = Path(path)
+    require_utf8_path(path)
     if not path.exists():
         raise InputError(path, "no such file or folder")
     if path.is_dir() or path.suffix in {".bag", ".db3", ".mcap"}:

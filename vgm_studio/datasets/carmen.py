@@ -19,13 +19,20 @@ import math
 import re
 from collections import Counter
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from vgm_studio.core.hashing import content_hash
+from vgm_studio.datasets.carmen_lines import (
+    MESSAGE_NAME,
+    LineParser,
+    RawScan,
+    found_messages,
+    parse_flaser,
+    parse_robotlaser,
+)
 from vgm_studio.datasets.options import ReadOptions
 from vgm_studio.datasets.scans import PoseSource, Scan, ScanLog
 from vgm_studio.errors import InputError
@@ -53,117 +60,6 @@ def flaser_angles(num_beams: int, fov_deg: float = 180.0) -> tuple[float, float]
     fov = math.radians(fov_deg)
     steps = num_beams - 1 if num_beams % 2 == 1 else num_beams
     return -fov / 2.0, fov / max(steps, 1)
-
-
-@dataclass
-class _RawScan:
-    line: int
-    timestamp: float
-    ranges: NDArray[np.float32]
-    angle_min: float | None  # None: FLASER convention, fixed once the log is read
-    angle_increment: float | None
-    max_range: float | None
-    pose: NDArray[np.float64]
-    odom_before: NDArray[np.float64] | None
-
-
-class _LineParser:
-    """Splits and converts one message, raising ``InputError`` with the line number."""
-
-    def __init__(self, path: Path, lineno: int, tokens: list[str]) -> None:
-        self.path, self.lineno, self.tokens = path, lineno, tokens
-
-    def fail(self, message: str) -> InputError:
-        return InputError(self.path, f"{self.tokens[0]}: {message}", line=self.lineno)
-
-    def need(self, count: int, what: str) -> None:
-        if len(self.tokens) < count:
-            raise self.fail(f"expected at least {count} fields ({what}), found {len(self.tokens)}")
-
-    def number(self, i: int) -> float:
-        try:
-            value = float(self.tokens[i])
-        except (ValueError, IndexError):
-            raise self.fail(f"field {i} {self.tokens[i]!r} is not a number") from None
-        if math.isnan(value):
-            raise self.fail(f"field {i} is NaN")
-        return value
-
-    def count(self, i: int) -> int:
-        try:
-            value = int(self.tokens[i])
-        except (ValueError, IndexError):
-            raise self.fail(f"field {i} {self.tokens[i]!r} is not a beam count") from None
-        if value < 0:
-            raise self.fail(f"negative beam count {value}")
-        return value
-
-    def numbers(self, start: int, stop: int) -> NDArray[np.float64]:
-        try:
-            return np.array(self.tokens[start:stop], dtype=np.float64)
-        except ValueError:
-            for i in range(start, stop):
-                self.number(i)
-            raise
-
-    def ranges(self, start: int, stop: int) -> NDArray[np.float32]:
-        """The readings ``start:stop``; each must be a finite distance, ≥ 0."""
-        values = self.numbers(start, stop)
-        bad = np.flatnonzero(~np.isfinite(values) | (values < 0))
-        if len(bad):
-            k = int(bad[0])
-            raise self.fail(
-                f"range {k + 1} (field {start + k}) is {self.tokens[start + k]!r}; "
-                "a reading must be a finite distance ≥ 0"
-                + (f" ({len(bad)} such readings)" if len(bad) > 1 else "")
-            )
-        return values.astype(np.float32)
-
-    def pose(self, start: int) -> NDArray[np.float64]:
-        pose = np.array([self.number(start + k) for k in range(3)])
-        if not np.all(np.isfinite(pose)):
-            raise self.fail(f"pose (fields {start}..{start + 2}) is not finite")
-        return pose
-
-    def timestamp(self, i: int) -> float:
-        return self.number(i) if i < len(self.tokens) else float("nan")
-
-
-def _parse_flaser(p: _LineParser) -> _RawScan:
-    n = p.count(1)
-    p.need(2 + n + 6, f"{n} ranges and two poses")
-    return _RawScan(
-        line=p.lineno,
-        timestamp=p.timestamp(2 + n + 6),
-        ranges=p.ranges(2, 2 + n),
-        angle_min=None,
-        angle_increment=None,
-        max_range=None,
-        pose=p.pose(2 + n),
-        odom_before=None,
-    )
-
-
-def _parse_robotlaser(p: _LineParser) -> _RawScan:
-    p.need(9, "laser configuration")
-    start, _fov, res, max_range = (p.number(i) for i in (2, 3, 4, 5))
-    if not (math.isfinite(max_range) and max_range > 0):
-        raise p.fail(f"maximum range (field 5) must be a positive distance, got {max_range}")
-    n = p.count(8)
-    p.need(9 + n + 1, f"{n} ranges and the remission count")
-    m = p.count(9 + n)
-    tail = 9 + n + 1 + m
-    p.need(tail + 6, "laser and robot poses")
-    return _RawScan(
-        line=p.lineno,
-        timestamp=p.timestamp(tail + 11),
-        ranges=p.ranges(9, 9 + n),
-        angle_min=start,
-        angle_increment=res,
-        max_range=max_range,
-        pose=p.pose(tail),
-        odom_before=None,
-    )
 
 
 def _guess_pose_source(path: Path, counts: Counter[str]) -> PoseSource:
@@ -211,7 +107,7 @@ def read_carmen(path: str | Path, options: ReadOptions | None = None) -> ScanLog
     scan_type = "FLASER" if options.laser == "front" else "RLASER"
     counts: Counter[str] = Counter()
     ignored: Counter[str] = Counter()
-    raw: list[_RawScan] = []
+    raw: list[RawScan] = []
     truepos: list[tuple[float, NDArray[np.float64]]] = []
     last_odom: NDArray[np.float64] | None = None
     bad: list[int] = []
@@ -227,10 +123,10 @@ def read_carmen(path: str | Path, options: ReadOptions | None = None) -> ScanLog
         counts[kind] += 1
         if kind in SKIPPED:
             continue
-        p = _LineParser(path, lineno, tokens)
+        p = LineParser(path, lineno, tokens)
         try:
             if kind == scan_type or (kind == "ROBOTLASER1" and options.laser == "front"):
-                scan = _parse_flaser(p) if kind != "ROBOTLASER1" else _parse_robotlaser(p)
+                scan = parse_flaser(p) if kind != "ROBOTLASER1" else parse_robotlaser(p)
                 scan.odom_before = last_odom
                 raw.append(scan)
             elif kind == "ODOM":
@@ -238,15 +134,15 @@ def read_carmen(path: str | Path, options: ReadOptions | None = None) -> ScanLog
                 last_odom = p.pose(1)
             elif kind == "TRUEPOS":
                 p.need(7, "true pose, odometry pose and timestamp")
-                truepos.append((p.number(7) if len(tokens) > 7 else math.nan, p.pose(1)))
+                truepos.append((p.timestamp(7), p.pose(1)))
             else:
-                ignored[kind] += 1
+                ignored[kind if MESSAGE_NAME.fullmatch(kind) else "(not a message)"] += 1
         except InputError:
             if not options.skip_bad_lines:
                 raise
             bad.append(lineno)
     if not raw:
-        found = ", ".join(f"{k} ×{v}" for k, v in counts.most_common(5)) or "nothing"
+        found = found_messages(counts)
         raise InputError(path, f"no {scan_type}/ROBOTLASER1 scans in this log (found {found})")
 
     source: PoseSource = (

@@ -6,6 +6,7 @@ timestamp2 in the frame of the scan taken at timestamp1. Timestamps are the scan
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,6 +14,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vgm_studio.errors import InputError
+
+_FIELDS = ("t1", "t2", "x", "y", "z", "roll", "pitch", "yaw")
 
 
 @dataclass(frozen=True)
@@ -40,25 +43,40 @@ def read_relations(path: str | Path) -> list[Relation]:
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "no such file")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(
+            path, f"not a text relations file ({exc.reason} at byte {exc.start})"
+        ) from None
+    except OSError as exc:
+        raise InputError(path, f"cannot read ({exc.strerror or type(exc).__name__})") from None
     out = []
-    for lineno, text in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
-        tokens = text.split()
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        tokens = line.split()
         if not tokens or tokens[0].startswith("#"):
             continue
-        if len(tokens) != 8:
-            raise InputError(
-                path,
-                f"expected 8 fields (t1 t2 x y z roll pitch yaw), found {len(tokens)}",
-                line=lineno,
-            )
-        try:
-            v = [float(t) for t in tokens]
-        except ValueError:
-            raise InputError(path, "every field must be a number", line=lineno) from None
-        out.append(Relation(lineno, v[0], v[1], np.array([v[2], v[3], v[7]])))
+        out.append(_parse_line(path, lineno, tokens))
     if not out:
         raise InputError(path, "holds no relations")
     return out
+
+
+def _parse_line(path: Path, lineno: int, tokens: list[str]) -> Relation:
+    if len(tokens) != 8:
+        raise InputError(
+            path,
+            f"expected 8 fields (t1 t2 x y z roll pitch yaw), found {len(tokens)}",
+            line=lineno,
+        )
+    try:
+        v = [float(t) for t in tokens]
+    except ValueError:
+        raise InputError(path, "every field must be a number", line=lineno) from None
+    bad = [_FIELDS[i] for i, x in enumerate(v) if not math.isfinite(x)]
+    if bad:
+        raise InputError(path, f"{', '.join(bad)}: not a finite number", line=lineno)
+    return Relation(lineno, v[0], v[1], np.array([v[2], v[3], v[7]]))
 
 
 def looks_like_relations(path: Path) -> bool:

@@ -22,12 +22,15 @@ from typing import Any
 from vgm_studio import __version__
 from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.errors import InputError
+from vgm_studio.labels.check import check_workspace, check_writable
+from vgm_studio.labels.schema import aware
 from vgm_studio.matching.edges import Edge
 
 SCHEMA = 1
 FORMAT = "vgm-studio-workspace"
 DB_NAME = "labels.sqlite"
 HUMAN_LABELS: tuple[str, ...] = ("success", "failure")
+_HINT = "; the workspace folder and its files must be writable (not read-only or immutable)"
 
 _TABLES = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -135,15 +138,23 @@ class LabelStore:
             self._db.execute(f"PRAGMA synchronous={'FULL' if durable else 'NORMAL'}")
             self._db.execute("PRAGMA foreign_keys=ON")
             self._db.execute("PRAGMA busy_timeout=5000")
+        except sqlite3.OperationalError as exc:  # read-only, immutable, locked: not damage
+            raise InputError(self.path, f"cannot open the label store ({exc}){_HINT}") from None
         except sqlite3.DatabaseError as exc:
             raise InputError(self.path, f"not a VGM Studio workspace ({exc})") from None
         except (OSError, sqlite3.Error) as exc:
-            raise InputError(self.path, f"cannot open the label store ({exc})") from None
+            raise InputError(self.path, f"cannot open the label store ({exc}){_HINT}") from None
         self._lock = threading.RLock()
         self._depth = 0
         if fresh:
-            self._create()
+            try:
+                self._create()
+            except sqlite3.OperationalError as exc:
+                raise InputError(self.path, f"cannot make the label store ({exc}){_HINT}") from None
         self._check_version()
+        check_workspace(self._db, self.path, _TABLES)
+        if create:  # the commands that may make a store are those that write to it
+            check_writable(self._db, self.path)
 
     def _create(self) -> None:
         with self.transaction() as db:
@@ -375,7 +386,8 @@ class LabelStore:
                 "SELECT label, note, labeled_at FROM labels WHERE edge_id = ? AND annotator = ?",
                 (record.edge_id, record.annotator),
             ).fetchone()
-            if row is not None and (row[2] >= record.labeled_at):
+            # As instants, not text: "13:00+05:00" is earlier than "12:00+00:00".
+            if row is not None and aware(row[2]) >= aware(record.labeled_at):
                 return False
             self._append(
                 record.edge_id,

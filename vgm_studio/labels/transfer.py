@@ -12,12 +12,14 @@ import io
 import json
 import os
 import tempfile
-from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 from vgm_studio.errors import InputError
-from vgm_studio.labels.store import HUMAN_LABELS, LabelRecord, LabelStore
+from vgm_studio.labels.schema import escape_cell, parse_label_row, unescape_cell
+from vgm_studio.labels.store import LabelRecord, LabelStore
+from vgm_studio.matching.edge_scans import check_viewable
+from vgm_studio.matching.edge_schema import json_lines, load_json_line
 from vgm_studio.matching.edges import Edge
 
 FORMATS = (".jsonl", ".csv")
@@ -69,18 +71,34 @@ def label_rows(store: LabelStore) -> list[dict[str, Any]]:
 
 
 def export_labels(store: LabelStore, out: Path) -> int:
-    """Writes the store's labels to ``out`` (.jsonl or .csv) atomically. Returns the count."""
+    """Writes the store's labels to ``out`` (.jsonl or .csv) atomically. Returns the count.
+
+    Raises:
+        InputError: ``out`` has another suffix, or its folder cannot be written.
+    """
     suffix = _check_format(out)
     rows = label_rows(store)
     if suffix == ".jsonl":
         text = "".join(json.dumps(r, separators=(",", ":")) + "\n" for r in rows)
     else:
         buffer = io.StringIO()
-        writer = csv.DictWriter(buffer, fieldnames=COLUMNS, lineterminator="\n")
+        # CRLF, as RFC 4180 and spreadsheets write it: the csv module then quotes a cell
+        # holding either character, so a note with a carriage return stays one cell.
+        writer = csv.DictWriter(buffer, fieldnames=COLUMNS, lineterminator="\r\n")
         writer.writeheader()
         for row in rows:
-            writer.writerow({k: json.dumps(row[k]) if k in _NESTED else row[k] for k in COLUMNS})
+            writer.writerow(
+                {k: json.dumps(row[k]) if k in _NESTED else escape_cell(row[k]) for k in COLUMNS}
+            )
         text = buffer.getvalue()
+    try:
+        _write_atomically(out, text)
+    except OSError as exc:
+        raise InputError(out, f"cannot write here ({exc.strerror or type(exc).__name__})") from None
+    return len(rows)
+
+
+def _write_atomically(out: Path, text: str) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
     try:
@@ -91,93 +109,92 @@ def export_labels(store: LabelStore, out: Path) -> int:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-    return len(rows)
 
 
-def _read_rows(path: Path) -> list[tuple[int, dict[str, Any]]]:
+def _read_text(path: Path, suffix: str) -> str:
     if not path.is_file():
         raise InputError(path, "no such file")
-    suffix = _check_format(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        # Spreadsheets save CSV with a byte-order mark. No newline translation: a carriage
+        # return inside a quoted cell is part of the cell.
+        encoding = "utf-8-sig" if suffix == ".csv" else "utf-8"
+        with path.open(encoding=encoding, newline="") as f:
+            return f.read()
     except UnicodeDecodeError as exc:
         raise InputError(path, f"not a text file ({exc.reason} at byte {exc.start})") from None
-    rows: list[tuple[int, dict[str, Any]]] = []
+    except OSError as exc:
+        raise InputError(path, f"cannot read ({exc.strerror or type(exc).__name__})") from None
+
+
+def _read_rows(path: Path) -> list[tuple[int, Any]]:
+    suffix = _check_format(path)
+    text = _read_text(path, suffix)
     if suffix == ".jsonl":
-        for lineno, line in enumerate(text.splitlines(), start=1):
-            if line.strip():
-                try:
-                    rows.append((lineno, json.loads(line)))
-                except json.JSONDecodeError as exc:
-                    raise InputError(path, f"not JSON ({exc.msg})", line=lineno) from None
-        return rows
+        return [
+            (lineno, load_json_line(line, path, lineno))
+            for lineno, line in enumerate(json_lines(text), start=1)
+            if line.strip()
+        ]
+    return _read_csv(path, text)
+
+
+def _read_csv(path: Path, text: str) -> list[tuple[int, Any]]:
     reader = csv.DictReader(io.StringIO(text, newline=""))
-    missing = [
-        c
-        for c in ("edge_id", "annotator", "label", "labeled_at")
-        if c not in (reader.fieldnames or [])
-    ]
-    if missing:
-        raise InputError(path, f"CSV header lacks {', '.join(missing)}", line=1)
-    for row in reader:
-        lineno = reader.line_num
-        parsed: dict[str, Any] = dict(row)
-        for key in _NESTED:
-            if row.get(key):
-                try:
-                    parsed[key] = json.loads(row[key])
-                except json.JSONDecodeError:
-                    raise InputError(path, f"column {key} is not JSON", line=lineno) from None
-        for key in ("timestamp_a", "timestamp_b"):
-            parsed[key] = float(row[key]) if row.get(key) else None
-        parsed["reference_label"] = row.get("reference_label") or None
-        rows.append((lineno, parsed))
+    rows: list[tuple[int, Any]] = []
+    done = 0  # the last line of the last record read whole
+    try:
+        header = reader.fieldnames or []
+        missing = [c for c in ("edge_id", "annotator", "label", "labeled_at") if c not in header]
+        if missing:
+            raise InputError(path, f"CSV header lacks {', '.join(missing)}", line=1)
+        done = reader.line_num
+        for row in reader:
+            rows.append((done + 1, _csv_row(path, done + 1, row)))
+            done = reader.line_num
+    except csv.Error as exc:  # e.g. a cell over csv.field_size_limit() characters
+        raise InputError(path, f"not CSV we read ({exc})", line=done + 1) from None
     return rows
+
+
+def _csv_row(path: Path, lineno: int, row: dict[str | None, Any]) -> dict[str, Any]:
+    """A CSV row as the JSONL row it was written from: cells unescaped, nested JSON parsed."""
+    parsed: dict[str, Any] = {}
+    for key, value in row.items():
+        # A short row leaves None; a long one puts its extra cells under the key None.
+        if key is None or value is None or value == "":
+            continue
+        value = unescape_cell(value)
+        parsed[key] = load_json_line(value, path, lineno) if key in _NESTED else value
+    return parsed
 
 
 def import_labels(store: LabelStore, path: Path) -> tuple[int, int]:
     """Adds a label file's edges and labels to the store; a newer label wins.
 
-    The whole file is checked before anything is written, so a bad line changes nothing.
+    Every row is checked first (its schema, and that the studio can show its edge: the log
+    is there, unchanged, and holds the scans), then everything is written in one
+    transaction: a bad row, or a failure while writing, changes nothing.
 
     Returns:
         (edges added, labels added or updated).
 
     Raises:
-        InputError: A line is not an exported label (names the file and line).
+        InputError: A row is not an exported label (names the file, line and field).
     """
-    edges: list[Edge] = []
+    rows: list[tuple[int, Edge]] = []
     records: list[LabelRecord] = []
-    for lineno, row in _read_rows(path):
-        if not isinstance(row, dict):
-            raise InputError(path, "a label row must be a JSON object", line=lineno)
-        annotator = row.get("annotator")
-        if not isinstance(annotator, str) or not annotator.strip():
-            raise InputError(path, "row has no annotator (is this an exported label file?)", lineno)
-        if row.get("label") not in HUMAN_LABELS:
-            raise InputError(
-                path, f"label {row.get('label')!r} is not one of {', '.join(HUMAN_LABELS)}", lineno
-            )
-        labeled_at = row.get("labeled_at")
-        try:
-            datetime.fromisoformat(str(labeled_at))
-        except ValueError:
-            raise InputError(
-                path, f"labeled_at {labeled_at!r} is not an ISO time", lineno
-            ) from None
-        edge_obj = {**row, "label": row.get("reference_label")}
-        edges.append(Edge.from_json(edge_obj, path, lineno))
+    for lineno, obj in _read_rows(path):
+        edge, fields = parse_label_row(obj, path, lineno)
+        rows.append((lineno, edge))
         records.append(
             LabelRecord(
-                str(row["edge_id"]),
-                annotator,
-                row["label"],
-                str(row.get("note") or ""),
-                str(labeled_at),
+                edge.edge_id, fields.annotator, fields.label, fields.note or "", fields.labeled_at
             )
         )
     if not records:
         raise InputError(path, "holds no labels")
-    added = store.add_edges(edges)
-    changed = sum(store.import_label(r) for r in records)
+    check_viewable(rows, path)
+    with store.transaction():
+        added = store.add_edges(edge for _, edge in rows)
+        changed = sum(store.import_label(r) for r in records)
     return added, changed

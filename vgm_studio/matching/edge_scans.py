@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
+from vgm_studio.core.hashing import content_hash
 from vgm_studio.datasets import ReadOptions, Scan, ScanLog, open_log
 from vgm_studio.errors import InputError
 from vgm_studio.matching.edges import Edge
@@ -28,23 +30,26 @@ class EdgeScans:
                 raise InputError(
                     path, f"edge {edge.edge_id} has unknown read options: {exc}"
                 ) from None
-            log = open_log(path, options)
-            if edge.log_sha256 and log.content_hash != edge.log_sha256:
+            # Hash before parsing: a path in an edges file must not make us read, and then
+            # quote in an error, a file that is not the log the edge was made from.
+            if edge.log_sha256 and content_hash(path) != edge.log_sha256:
                 raise InputError(
                     path,
                     f"content differs from the log edge {edge.edge_id} was "
                     "made from (sha256 mismatch); make the candidates again",
                 )
+            log = open_log(path, options)
             self._logs[key] = log
         return log
 
     def _locate(self, edge: Edge) -> Path:
         path = Path(edge.log_path)
-        if path.exists():
+        # Only a regular file or a bag folder: never a device, a FIFO or a socket.
+        if path.is_file() or path.is_dir():
             return path
         for folder in self._search_dirs:
             alt = folder / path.name
-            if alt.exists():
+            if alt.is_file() or alt.is_dir():
                 return alt
         raise InputError(path, f"log of edge {edge.edge_id} not found")
 
@@ -56,3 +61,37 @@ class EdgeScans:
                 f"edge {edge.edge_id} names scans {edge.a}, {edge.b} but the log has {len(log)}",
             )
         return log.scans[edge.a], log.scans[edge.b]
+
+
+def check_viewable(rows: Sequence[tuple[int, Edge]], source: Path) -> None:
+    """Refuses edges the studio could not show, before any is stored.
+
+    Each edge's log must be where the edge says, hold the content it was made from, and hold
+    the scans it names. Each log is read once.
+
+    Args:
+        rows: (line, edge) pairs of the file the edges come from.
+        source: That file, for the messages.
+
+    Raises:
+        InputError: ``source:line: field: what is wrong`` for the first edge that fails.
+    """
+    scans = EdgeScans()
+    for line, edge in rows:
+        if not edge.log_sha256:
+            raise InputError(
+                source,
+                "log_sha256: missing; the studio reads only a log whose content it can check",
+                line,
+            )
+        try:
+            log = scans.log_for(edge)
+        except InputError as exc:
+            raise InputError(source, f"log_path: {exc}", line) from None
+        for field, index in (("a", edge.a), ("b", edge.b)):
+            if index >= len(log):
+                raise InputError(
+                    source,
+                    f"{field}: scan {index} is past the end of its log ({len(log)} scans)",
+                    line,
+                )

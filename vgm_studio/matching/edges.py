@@ -12,9 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-import numpy as np
-
 from vgm_studio.errors import InputError
+from vgm_studio.matching.edge_schema import json_lines, load_json_line, parse_edge_row
 
 EdgeKind = Literal["sequential", "loop"]
 Label = Literal["success", "failure", "ambiguous"]
@@ -88,62 +87,28 @@ class Edge:
 
     @classmethod
     def from_json(cls, obj: Any, path: Path | str | None = None, line: int | None = None) -> Edge:
-        """Parses one edge object, raising ``InputError`` that names the file and line."""
-
-        def bad(msg: str) -> InputError:
-            return InputError(path, msg, line=line)
-
-        if not isinstance(obj, dict):
-            raise bad("an edge must be a JSON object")
-        required = ("edge_id", "log_path", "a", "b", "kind", "guess", "estimate")
-        missing = [k for k in required if k not in obj]
-        if missing:
-            raise bad(f"edge lacks {', '.join(missing)}")
-        if obj["kind"] not in KINDS:
-            raise bad(f"unknown kind {obj['kind']!r} (expected one of {', '.join(KINDS)})")
-        label = obj.get("label")
-        if label is not None and label not in LABELS:
-            raise bad(f"unknown label {label!r} (expected one of {', '.join(LABELS)} or null)")
-
-        def pose(key: str, optional: bool = False) -> PoseList | None:
-            value = obj.get(key)
-            if value is None and optional:
-                return None
-            try:
-                arr = np.asarray(value, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise bad(f"{key} must be [x, y, theta]") from None
-            if arr.shape != (3,) or not np.all(np.isfinite(arr)):
-                raise bad(f"{key} must be three finite numbers [x, y, theta]")
-            return [float(v) for v in arr]
-
-        try:
-            a, b = int(obj["a"]), int(obj["b"])
-        except (TypeError, ValueError):
-            raise bad("a and b must be scan indices") from None
+        """Parses one edge object, raising ``InputError`` that names the file, line and field."""
+        row = parse_edge_row(obj, path, line)
         return cls(
-            edge_id=str(obj["edge_id"]),
-            log_path=str(obj["log_path"]),
-            log_sha256=str(obj.get("log_sha256", "")),
-            a=a,
-            b=b,
-            timestamp_a=_float_or_nan(obj.get("timestamp_a")),
-            timestamp_b=_float_or_nan(obj.get("timestamp_b")),
-            kind=obj["kind"],
-            guess=pose("guess") or [],
-            estimate=pose("estimate") or [],
-            match=dict(obj.get("match") or {}),
-            reference=pose("reference", optional=True),
-            label=label,
-            params=dict(obj.get("params") or {}),
+            edge_id=row.edge_id,
+            log_path=row.log_path,
+            log_sha256=row.log_sha256,
+            a=row.a,
+            b=row.b,
+            timestamp_a=_nan_if_none(row.timestamp_a),
+            timestamp_b=_nan_if_none(row.timestamp_b),
+            kind=row.kind,
+            guess=row.guess,
+            estimate=row.estimate,
+            match=row.match.model_dump(exclude_unset=True),
+            reference=row.reference,
+            label=row.label,
+            params=row.params.model_dump(exclude_unset=True),
         )
 
 
-def _float_or_nan(value: Any) -> float:
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        return float("nan")
+def _nan_if_none(value: float | None) -> float:
+    return float("nan") if value is None else value
 
 
 def _finite_or_none(value: float) -> float | None:
@@ -172,28 +137,34 @@ def write_edges(path: str | Path, edges: Iterable[Edge]) -> int:
 
 def read_edges(path: str | Path) -> list[Edge]:
     """Reads a JSONL edge file; a malformed line raises ``InputError`` with its line number."""
+    return [edge for _, edge in read_edge_rows(path)]
+
+
+def read_edge_rows(path: str | Path) -> list[tuple[int, Edge]]:
+    """Reads a JSONL edge file as (line number, edge) pairs.
+
+    Raises:
+        InputError: The file is missing, not UTF-8, empty, or a line breaks the edge schema
+            (``file:line: field: what is wrong``).
+    """
     path = Path(path)
     if path.is_dir():
         raise InputError(path, "is a folder, not an edges file")
     if not path.is_file():
         raise InputError(path, "no such file")
-    edges = []
     try:
-        lines = path.read_text(encoding="utf-8").splitlines()
+        lines = json_lines(path.read_bytes().decode("utf-8"))
     except UnicodeDecodeError as exc:
         raise InputError(
             path, f"not a text edges file ({exc.reason} at byte {exc.start})"
         ) from None
-    for lineno, text in enumerate(lines, start=1):
-        if not text.strip():
-            continue
-        try:
-            obj = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise InputError(
-                path, f"not JSON ({exc.msg} at column {exc.colno})", line=lineno
-            ) from None
-        edges.append(Edge.from_json(obj, path, lineno))
-    if not edges:
+    except OSError as exc:
+        raise InputError(path, f"cannot read ({exc.strerror or type(exc).__name__})") from None
+    rows = [
+        (lineno, Edge.from_json(load_json_line(text, path, lineno), path, lineno))
+        for lineno, text in enumerate(lines, start=1)
+        if text.strip()
+    ]
+    if not rows:
         raise InputError(path, "holds no edges")
-    return edges
+    return rows

@@ -19,7 +19,8 @@ import torch
 
 from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.errors import InputError
-from vgm_studio.model.registry import MODEL_NAMES
+from vgm_studio.model.checkpoint_schema import parse_checkpoint_meta
+from vgm_studio.model.operating import PrecisionCurve, threshold_for_precision
 from vgm_studio.vgm.grid import VGMParams
 
 FORMAT = "vgm-studio-model/1"
@@ -45,6 +46,8 @@ class Checkpoint:
         history: One record per epoch.
         device: Where it was trained.
         created: When (UTC, ISO 8601).
+        curve: Validation precision and recall at every cut, for choosing a cut by
+            precision; None in checkpoints written before it was kept.
     """
 
     model: str
@@ -58,10 +61,12 @@ class Checkpoint:
     history: list[dict[str, Any]] = field(default_factory=list)
     device: str = "cpu"
     created: str = field(default_factory=_now)
+    curve: PrecisionCurve | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The on-disk layout."""
         out: dict[str, Any] = {"format": FORMAT, **self.__dict__, "vgm": asdict(self.vgm)}
+        out["curve"] = self.curve.to_dict() if self.curve is not None else None
         return {k: v for k, v in out.items() if v is not None}
 
     @classmethod
@@ -74,6 +79,7 @@ class Checkpoint:
             hyper=dict(content.get("hyper") or {}),
             threshold=DEFAULT_THRESHOLD if threshold is None else float(threshold),
             metrics=dict(content.get("metrics") or {}),
+            curve=PrecisionCurve.from_dict(content["curve"]) if content.get("curve") else None,
             training=dict(content.get("training") or {}),
             state_dict=content.get("state_dict"),
             score=content.get("score"),
@@ -115,8 +121,7 @@ def load_checkpoint(path: Path, expect_vgm: VGMParams | None = None) -> Checkpoi
         raise InputError(path, f"not a readable model checkpoint ({type(exc).__name__})") from None
     if not isinstance(content, dict) or content.get("format") != FORMAT:
         raise InputError(path, f"not a VGM Studio model (expected format {FORMAT})")
-    if content.get("model") not in MODEL_NAMES:
-        raise InputError(path, f"unknown model {content.get('model')!r}")
+    parse_checkpoint_meta(content, path)  # types and ranges, before anything reads them
     checkpoint = Checkpoint.from_dict(content)
     vgm = checkpoint.vgm
     if expect_vgm is not None and vgm != expect_vgm:
@@ -128,3 +133,27 @@ def load_checkpoint(path: Path, expect_vgm: VGMParams | None = None) -> Checkpoi
             f"{expect_vgm.sigma} m were asked for; retrain or use matching VGMs",
         )
     return checkpoint
+
+
+def precision_threshold(checkpoint: Checkpoint, precision: float, path: Path | None) -> float:
+    """The lowest p(success) cut whose validation precision reaches ``precision``.
+
+    Raises:
+        InputError: The checkpoint keeps no validation curve (written before curves were
+            kept), or no cut on it reaches ``precision``.
+    """
+    curve = checkpoint.curve
+    if curve is None:
+        raise InputError(
+            path,
+            "keeps no validation precision curve, so --loop-precision cannot choose a "
+            "threshold; retrain it or use --loop-threshold",
+        )
+    cut = threshold_for_precision(curve, precision)
+    if cut is None:
+        raise InputError(
+            path,
+            f"no threshold reaches validation precision {precision:g} "
+            f"(best {max(curve.precision):.4f}); ask for less or use --loop-threshold",
+        )
+    return cut

@@ -18,7 +18,7 @@ from tqdm import tqdm
 from vgm_studio.core import se2
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
-from vgm_studio.vgm.grid import VGMParams, grid_cells
+from vgm_studio.vgm.grid import VGMParams, batch_cells
 
 
 @dataclass(frozen=True)
@@ -86,6 +86,65 @@ def _rotate(points: NDArray[np.float32], angle: float) -> NDArray[np.float32]:
     return (points @ np.array([[c, s], [-s, c]], dtype=np.float32)).astype(np.float32)
 
 
+@dataclass(frozen=True)
+class FoldedCells:
+    """The occupied cells of a batch's VGMs in the space-to-depth folded layout.
+
+    Attributes:
+        batch: Pairs in the batch.
+        side: Folded grid side, size / fold.
+        depth: Folded channels, C·fold² (C is 2, or 4 with occupancy).
+        pair: For each occupied cell, its pair's index in the batch.
+        position: Its folded position, row·side + column.
+        channel: Its folded channel, c·fold² + (i mod fold)·fold + (j mod fold).
+        value: Its value (lifted; 1 in the occupancy channels).
+    """
+
+    batch: int
+    side: int
+    depth: int
+    pair: NDArray[np.int64]
+    position: NDArray[np.int64]
+    channel: NDArray[np.int64]
+    value: NDArray[np.float32]
+
+
+def folded_cells(
+    samples: Sequence[PairSample],
+    params: VGMParams,
+    rotations: Sequence[float] | NDArray[np.float64] | None = None,
+    fold: int = 1,
+    lift: float = 1.0,
+    occupancy: bool = False,
+) -> FoldedCells:
+    """Every occupied cell of a batch's VGMs, all pairs' channels built in one numpy pass;
+    ``vgm_batch`` documents the arguments."""
+    if params.size % fold:
+        raise ValueError(f"VGM size {params.size} is not a multiple of fold {fold}")
+    side = params.size // fold
+    clouds = []
+    for k, s in enumerate(samples):
+        prev, cur = s.prev, s.cur
+        if rotations is not None and rotations[k]:
+            prev, cur = _rotate(prev, rotations[k]), _rotate(cur, rotations[k])
+        clouds += [prev, cur]
+    slot, cell, value = batch_cells(
+        clouds, size=params.size, resolution=params.resolution, sigma=params.sigma
+    )
+    if lift != 1.0:
+        value = value**lift
+    i, j = np.divmod(cell, params.size)
+    pair, c = np.divmod(slot, 2)
+    position = (i // fold) * side + j // fold
+    channel = c * fold * fold + (i % fold) * fold + j % fold
+    if occupancy:
+        pair, position = np.tile(pair, 2), np.tile(position, 2)
+        channel = np.r_[channel, channel + 2 * fold * fold]
+        value = np.r_[value, np.ones_like(value)]
+    depth = (4 if occupancy else 2) * fold * fold
+    return FoldedCells(len(samples), side, depth, pair, position, channel, value)
+
+
 def vgm_batch(
     samples: Sequence[PairSample],
     params: VGMParams,
@@ -104,29 +163,12 @@ def vgm_batch(
     gives (B, C, size, size). The array
     is a channels-last view (``.transpose(0, 3, 1, 2)`` of a (B, H, W, C) buffer).
     """
-    if params.size % fold:
-        raise ValueError(f"VGM size {params.size} is not a multiple of fold {fold}")
-    side = params.size // fold
-    depth = (4 if occupancy else 2) * fold * fold
+    cells = folded_cells(samples, params, rotations, fold, lift, occupancy)
     # Written channels-last (B, H, W, C) and returned as a (B, C, H, W) view: torch takes it
     # as a channels-last tensor without copying the mostly-zero batch once more.
-    out = np.zeros((len(samples), side, side, depth), dtype=np.float32)
-    flat = out.reshape(len(samples), -1)
-    for k, s in enumerate(samples):
-        prev, cur = s.prev, s.cur
-        if rotations is not None and rotations[k]:
-            prev, cur = _rotate(prev, rotations[k]), _rotate(cur, rotations[k])
-        for c, pts in enumerate((prev, cur)):
-            cell, value = grid_cells(
-                pts, size=params.size, resolution=params.resolution, sigma=params.sigma
-            )
-            if lift != 1.0:
-                value = value**lift
-            i, j = np.divmod(cell, params.size)
-            at = ((i // fold) * side + j // fold) * depth + (i % fold) * fold + j % fold
-            flat[k, at + c * fold * fold] = value
-            if occupancy:
-                flat[k, at + (c + 2) * fold * fold] = 1.0
+    out = np.zeros((cells.batch, cells.side, cells.side, cells.depth), dtype=np.float32)
+    flat = out.reshape(cells.batch, -1)
+    flat[cells.pair, cells.position * cells.depth + cells.channel] = cells.value
     return out.transpose(0, 3, 1, 2)
 
 

@@ -30,6 +30,7 @@ from vgm_studio.matching.edges import Edge, read_edges
 from vgm_studio.model.checkpoint import Checkpoint, save_checkpoint
 from vgm_studio.model.features import PairSample, figures_matrix, load_samples
 from vgm_studio.model.metrics import binary_metrics
+from vgm_studio.model.operating import precision_curve
 from vgm_studio.model.registry import build_network, entry
 from vgm_studio.model.score import ScoreModel
 from vgm_studio.model.validator import (
@@ -271,6 +272,8 @@ def train(
     threshold = choose_threshold(val_labels, probs) if len(val_idx) else DEFAULT_THRESHOLD
     checkpoint.threshold = threshold
     checkpoint.metrics = binary_metrics(val_labels, probs, threshold) if len(val_idx) else {}
+    # The whole validation curve, so a cut can later be chosen by precision (--loop-precision).
+    checkpoint.curve = precision_curve(val_labels, probs) if len(val_idx) else None
     checkpoint.training = {
         "files": data.files,
         "counts": counts,

@@ -14,14 +14,16 @@ from torch import nn
 
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
-from vgm_studio.model.checkpoint import Checkpoint, load_checkpoint
+from vgm_studio.model.checkpoint import Checkpoint, load_checkpoint, precision_threshold
 from vgm_studio.model.features import (
     PairSample,
     figures_matrix,
+    folded_cells,
     load_samples,
     rgb_batch,
     vgm_batch,
 )
+from vgm_studio.model.networks import VGMNet, fuse_batch_norm
 from vgm_studio.model.registry import build_network, entry
 from vgm_studio.model.score import ScoreModel
 from vgm_studio.vgm.grid import VGMParams
@@ -106,6 +108,45 @@ def forward(net: nn.Module, x: torch.Tensor, extra: torch.Tensor | None) -> torc
     return net(x, extra) if extra is not None else net(x)
 
 
+# Pairs per network pass on the sparse path: the stem's output for 64 pairs (20 MB) is
+# reused from the heap; for 256 (82 MB) each pass maps fresh pages, which costs more than the
+# convolutions on a CPU.
+_NET_CHUNK = 64
+
+
+def _sparse_logits(
+    net: VGMNet, spec: InputSpec, samples: Sequence[PairSample], device: torch.device
+) -> torch.Tensor:
+    """``forward`` of a folded VGMNet fed the batch's occupied cells, not its dense VGMs.
+
+    The cells of the whole batch are built in one numpy pass; the network then takes them
+    ``_NET_CHUNK`` pairs at a time.
+    """
+    cells = folded_cells(
+        samples, spec.vgm, fold=spec.fold, lift=spec.lift, occupancy=spec.occupancy
+    )
+    figures = figures_matrix(samples, spec.spread).astype(np.float32) if spec.figures else None
+    out = []
+    for start in range(0, cells.batch, _NET_CHUNK):
+        count = min(_NET_CHUNK, cells.batch - start)
+        mine = (cells.pair >= start) & (cells.pair < start + count)
+        index = (cells.pair[mine] - start) * cells.side * cells.side + cells.position[mine]
+        extra = None
+        if figures is not None:
+            extra = torch.from_numpy(figures[start : start + count]).to(device)
+        out.append(
+            net.forward_cells(
+                count,
+                cells.side,
+                torch.from_numpy(index).to(device),
+                torch.from_numpy(cells.channel[mine]).to(device),
+                torch.from_numpy(cells.value[mine]).to(device),
+                extra,
+            )
+        )
+    return torch.cat(out)
+
+
 def batched_logits(
     net: nn.Module,
     spec: InputSpec,
@@ -119,8 +160,12 @@ def batched_logits(
     with torch.inference_mode():
         for start in range(0, len(samples), batch_size):
             chunk = samples[start : start + batch_size]
-            x, extra = spec.tensors(chunk, device)
-            out[start : start + len(chunk)] = forward(net, x, extra).float().cpu().numpy()
+            if isinstance(net, VGMNet) and spec.kind == "vgm" and spec.fold > 1:
+                logits = _sparse_logits(net, spec, chunk, device)
+            else:
+                x, extra = spec.tensors(chunk, device)
+                logits = forward(net, x, extra)
+            out[start : start + len(chunk)] = logits.float().cpu().numpy()
     return out
 
 
@@ -143,6 +188,7 @@ class Validator:
         self.threshold = checkpoint.threshold
         self.device = pick_device(device)
         self.network: nn.Module | None = None
+        self.inference: nn.Module | None = None
         self.score: ScoreModel | None = None
         if entry(self.name).holds == "score":
             self.score = ScoreModel(**(checkpoint.score or {}))
@@ -154,6 +200,8 @@ class Validator:
             net.load_state_dict(checkpoint.state_dict or {})
             net.eval()
             self.network = net.to(self.device).to(memory_format=torch.channels_last)  # type: ignore[call-overload]
+            # Batch norm folded into the convolutions: the same values, one pass fewer.
+            self.inference = fuse_batch_norm(self.network)
 
     @classmethod
     def load(
@@ -168,14 +216,22 @@ class Validator:
         """The validation metrics recorded at training time."""
         return dict(self.checkpoint.metrics)
 
+    def threshold_at_precision(self, precision: float) -> float:
+        """The lowest p(success) cut whose validation precision reaches ``precision``.
+
+        Raises:
+            InputError: No validation curve in the checkpoint, or no cut reaches it.
+        """
+        return precision_threshold(self.checkpoint, precision, self.path)
+
     def predict_samples(
-        self, samples: Sequence[PairSample], batch_size: int = 64
+        self, samples: Sequence[PairSample], batch_size: int = 256
     ) -> NDArray[np.float64]:
         """p(success) for each sample, computed in batches."""
         if self.score is not None:
             return self.score.predict(figures_matrix(samples, len(self.score.mean) == 4))
-        assert self.network is not None
-        logits = batched_logits(self.network, self.spec, samples, self.device, batch_size)
+        assert self.inference is not None
+        logits = batched_logits(self.inference, self.spec, samples, self.device, batch_size)
         return np.asarray(1.0 / (1.0 + np.exp(-logits)))
 
     def decide(self, probabilities: NDArray[np.float64]) -> NDArray[np.bool_]:
@@ -186,7 +242,7 @@ class Validator:
         self,
         edges: Sequence[Edge],
         scans: EdgeScans | None = None,
-        batch_size: int = 64,
+        batch_size: int = 256,
         progress: bool = False,
     ) -> NDArray[np.float64]:
         """p(success) for each edge; the edges' logs are read once through ``scans``."""

@@ -70,8 +70,13 @@ def evaluate_model(
             "seconds": seconds,
             "edges": [str(p) for p in edges],
         }
-        json_out.parent.mkdir(parents=True, exist_ok=True)
-        json_out.write_text(json.dumps(record, indent=2) + "\n")
+        try:
+            json_out.parent.mkdir(parents=True, exist_ok=True)
+            json_out.write_text(json.dumps(record, indent=2) + "\n")
+        except OSError as exc:
+            raise InputError(
+                json_out, f"cannot write ({exc.strerror or type(exc).__name__})"
+            ) from None
     return format_metrics(validator.name, m, validator.threshold, seconds)
 
 

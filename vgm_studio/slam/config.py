@@ -106,6 +106,9 @@ class ValidationConfig:
         loop_threshold: p(success) a loop edge needs (never below the checkpoint's own
             threshold); None: the checkpoint's. That threshold was chosen for accuracy, but a
             graph pays far more for one false loop than for a missed one, and loops are many.
+        loop_precision: A loop edge also needs p(success) at or above the lowest cut whose
+            validation precision (the checkpoint's curve) reaches this; None: not asked.
+            With ``loop_threshold`` too, a loop must pass both: the higher cut wins.
         thresholds: What ``reference`` calls a success (only successes are kept).
         batch_size: Edges per forward pass of the model.
     """
@@ -113,6 +116,7 @@ class ValidationConfig:
     validator: ValidatorName = "vgmnet"
     model: Path | None = None
     loop_threshold: float | None = 0.8
+    loop_precision: float | None = None
     thresholds: LabelThresholds = field(default_factory=LabelThresholds)
     batch_size: int = 64
 

@@ -58,6 +58,11 @@ class EdgeValidator:
             )
         if config.validator in VALIDATOR_MODELS:
             self.model = _load(config.model, config.validator)
+        self.precision_cut: float | None = None
+        if config.loop_precision is not None:
+            if self.model is None:
+                raise InputError(None, "--loop-precision needs a model validator")
+            self.precision_cut = self.model.threshold_at_precision(config.loop_precision)
 
     def __call__(self, edges: Sequence[SlamEdge]) -> None:
         if not edges:
@@ -88,6 +93,8 @@ class EdgeValidator:
             loop = np.array([e.kind == "loop" for e in edges])
             if self.config.loop_threshold is not None:
                 keep &= ~loop | (p >= self.config.loop_threshold)
+            if self.precision_cut is not None:
+                keep &= ~loop | (p >= self.precision_cut)
             for e, pe, k in zip(edges, p, keep, strict=True):
                 e.p_success, e.kept = float(pe), bool(k)
 
@@ -97,11 +104,11 @@ class EdgeValidator:
 
 
 def _load(path: Path | None, validator: str) -> Validator:
-    from vgm_studio.model.validator import Validator
+    from vgm_studio.model.cache import shared_validator
 
     if path is None:
         raise InputError(None, f"--validator {validator} needs --model, a checkpoint of that model")
-    model = Validator.load(path)
+    model = shared_validator(path)
     if model.name not in VALIDATOR_MODELS[validator]:
         raise InputError(path, f"is a {model.name} checkpoint, not one for --validator {validator}")
     return model

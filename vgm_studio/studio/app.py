@@ -7,96 +7,37 @@ claimed and not handed to another.
 
 from __future__ import annotations
 
-import getpass
-import socket
 import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
-from typing import Any
 
-import numpy as np
 import viser
 
 from vgm_studio.errors import InputError
+from vgm_studio.labels.agreement import agreement
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
-from vgm_studio.studio.panel import Panel, build_panel, facts_text, position_text
-from vgm_studio.studio.queues import Queue, Snapshot, order
-from vgm_studio.studio.view import (
-    CUR_RGB,
-    PREV_RGB,
-    REFERENCE_RGB,
-    EdgeView,
-    ViewCache,
-    pose_marks,
+from vgm_studio.studio.config import StudioConfig, check_port_free, default_annotator
+from vgm_studio.studio.gate import Gate, guarded_serve, is_loopback, new_token
+from vgm_studio.studio.panel import (
+    agreement_text,
+    build_panel,
+    code,
+    facts_text,
+    layers_text,
+    plain,
+    position_text,
 )
-from vgm_studio.vgm.grid import VGMParams
+from vgm_studio.studio.queues import Queue, Snapshot, order
+from vgm_studio.studio.scene import TabScene
+from vgm_studio.studio.tab import Tab
+from vgm_studio.studio.view import EdgeView, ViewCache
 
-_ONE_POINT = np.zeros((1, 3), dtype=np.float32)  # placeholder until an edge has a reference
+# Where commands have always imported them from.
+__all__ = ["Studio", "StudioConfig", "check_port_free", "default_annotator"]
+
 PREFETCH = 3
-
-
-def default_annotator() -> str:
-    try:
-        return getpass.getuser()
-    except (KeyError, OSError):
-        return "annotator"
-
-
-@dataclass
-class StudioConfig:
-    """How the studio serves.
-
-    Attributes:
-        host: Interface to listen on; 127.0.0.1 keeps it on this machine.
-        port: TCP port.
-        annotator: Name a new tab starts with.
-        queue: Queue a new tab starts in.
-        vgm: Grid the heatmap is drawn on.
-        title: Shown in the browser's title bar.
-    """
-
-    host: str = "127.0.0.1"
-    port: int = 8080
-    annotator: str = field(default_factory=default_annotator)
-    queue: Queue = Queue.unlabelled
-    vgm: VGMParams = field(default_factory=VGMParams)
-    title: str = "VGM Studio"
-
-
-@dataclass
-class _Tab:
-    """One browser tab's state. ``lock`` keeps its key presses in order."""
-
-    client: viser.ClientHandle
-    panel: Panel
-    queue: Queue
-    order: list[str]
-    index: int = 0
-    undo: list[tuple[int, str]] = field(default_factory=list)  # (event id, edge id)
-    lock: threading.RLock = field(default_factory=threading.RLock)
-    nodes: dict[str, Any] = field(default_factory=dict)  # scene nodes, made once per tab
-
-    @property
-    def edge_id(self) -> str | None:
-        return self.order[self.index] if 0 <= self.index < len(self.order) else None
-
-
-def check_port_free(host: str, port: int) -> None:
-    """Fails before the server starts when another program holds the port.
-
-    Raises:
-        InputError: The port is in use or the host is not an address of this machine.
-    """
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            probe.bind((host, port))
-        except OSError as exc:
-            reason = "is in use; pass another --port" if exc.errno == 98 else f"({exc.strerror})"
-            raise InputError(f"{host}:{port}", f"cannot listen: the port {reason}") from None
 
 
 class Studio:
@@ -127,7 +68,7 @@ class Studio:
         self._edge_ids = store.edge_ids()
         self._edges: dict[str, Edge] = {}
         self._predictions = store.predictions()
-        self._tabs: dict[int, _Tab] = {}
+        self._tabs: dict[int, Tab] = {}
         self._claims: dict[str, int] = {}
         self._lock = threading.RLock()
         self._prefetcher = ThreadPoolExecutor(max_workers=1, thread_name_prefix="prefetch")
@@ -139,25 +80,33 @@ class Studio:
     @property
     def url(self) -> str:
         host = "localhost" if self.config.host in ("127.0.0.1", "0.0.0.0") else self.config.host
-        return f"http://{host}:{self.config.port}"
+        if ":" in host:
+            host = f"[{host}]"
+        path = Gate(self.config.host, self.config.token).page_path
+        return f"http://{host}:{self.config.port}{path}"
 
     def start(self) -> viser.ViserServer:
-        """Starts serving; returns at once (the server runs in its own threads)."""
+        """Starts serving; returns at once (the server runs in its own threads).
+
+        Off loopback the studio is reachable from other machines, so it then always asks for
+        a token (made up here unless the config names one); ``url`` carries it.
+        """
         check_port_free(self.config.host, self.config.port)
-        server = viser.ViserServer(host=self.config.host, port=self.config.port, verbose=False)
-        server.gui.configure_theme(
-            titlebar_content=None, control_layout="fixed", control_width="large", dark_mode=True
-        )
+        if self.config.token is None and not is_loopback(self.config.host):
+            self.config.token = new_token()
+        with guarded_serve(Gate(self.config.host, self.config.token)):
+            server = viser.ViserServer(host=self.config.host, port=self.config.port, verbose=False)
+        server.gui.configure_theme(titlebar_content=None, control_width="large", dark_mode=True)
+        # Docked, not floating: the 3D view ends where the panel begins, so a framed pair is
+        # never hidden under it.
+        server.gui.main_panel.dock_right()
         server.scene.set_up_direction("+z")
         server.scene.world_axes.visible = False
         # A flat top-down view needs no shadows, and shadow passes cost the most where the
         # browser renders without a GPU.
         server.scene.configure_default_lights(True, cast_shadow=False)
-        # Straight down on the previous scan's origin, +x right and +y up, ±7 m in view;
-        # "Reset View" in the browser comes back here.
-        server.initial_camera.position = (0.0, -0.001, 11.0)
-        server.initial_camera.look_at = (0.0, 0.0, 0.0)
-        server.initial_camera.up = (0.0, 0.0, 1.0)
+        # No server-wide initial camera: the browser would reset to it after the tab's own
+        # framing of its first edge had arrived. Each tab frames its edges (scene.TabScene).
         server.on_client_connect(self._connect)
         server.on_client_disconnect(self._disconnect)
         self.server = server
@@ -196,7 +145,7 @@ class Studio:
         for tab in list(self._tabs.values()):
             tab.panel.trainer.content = text
 
-    def _train_now(self, tab: _Tab) -> None:
+    def _train_now(self, tab: Tab) -> None:
         if self._train_now_callback is None:
             tab.client.add_notification(
                 "No trainer", "This studio runs without one.", auto_close_seconds=3.0
@@ -213,7 +162,7 @@ class Studio:
         preds = self._predictions
         return Snapshot(self._edge_ids, self.store.label_map(), preds.p, preds.threshold)
 
-    def _tab_actions(self, tab: _Tab) -> dict[str, Callable[[], None]]:
+    def _tab_actions(self, tab: Tab) -> dict[str, Callable[[], None]]:
         return {
             "success": lambda: self._label(tab, "success"),
             "failure": lambda: self._label(tab, "failure"),
@@ -222,6 +171,8 @@ class Studio:
             "previous": lambda: self._step(tab, -1),
             "next": lambda: self._step(tab, +1),
             "guess": lambda: self._toggle_guess(tab),
+            "layers": lambda: self._cycle_layers(tab),
+            "reset_view": lambda: tab.scene.reset_view(),
             "train_now": lambda: self._train_now(tab),
         }
 
@@ -229,10 +180,18 @@ class Studio:
         actions: dict[str, Callable[[], None]] = {}
         panel = build_panel(client, self.config.annotator, self.config.queue, actions)
         panel.trainer.content = self._trainer_text
-        tab = _Tab(client, panel, self.config.queue, order(self.config.queue, self._snapshot()))
+        panel.layers.content = layers_text("points and VGM")
+        tab = Tab(
+            client,
+            panel,
+            self.config.queue,
+            order(self.config.queue, self._snapshot()),
+            TabScene(client),
+        )
         actions.update(self._tab_actions(tab))
         panel.queue.on_update(lambda _e: self._switch_queue(tab, Queue(panel.queue.value)))
         panel.show_guess.on_update(lambda _e: self._redraw(tab))
+        client.camera.on_update(lambda _camera: self._lens_changed(tab))
         with tab.lock:
             self._tabs[client.client_id] = tab
             tab.index = -1
@@ -252,10 +211,16 @@ class Studio:
 
     # -- actions -------------------------------------------------------------------------
 
-    def _label(self, tab: _Tab, label: str) -> None:
+    def _label(self, tab: Tab, label: str) -> None:
         with tab.lock:
             edge_id = tab.edge_id
             if edge_id is None:
+                return
+            if tab.failed is not None:
+                # Nobody saw this edge: a label for it would be a guess.
+                tab.client.add_notification(
+                    "Not labelled", "This edge cannot be shown.", auto_close_seconds=3.0
+                )
                 return
             annotator = tab.panel.annotator.value.strip() or self.config.annotator
             event = self.store.label(edge_id, annotator, label, tab.panel.note.value.strip())
@@ -263,21 +228,23 @@ class Studio:
             tab.panel.note.value = ""  # type: ignore[misc]  # viser's setter, unseen by mypy
             self._move(tab, +1)
 
-    def _skip(self, tab: _Tab) -> None:
+    def _skip(self, tab: Tab) -> None:
         with tab.lock:
             if tab.edge_id is not None:
                 annotator = tab.panel.annotator.value.strip() or self.config.annotator
                 self.store.skip(tab.edge_id, annotator)
+                tab.undo.append((None, tab.edge_id))
             self._move(tab, +1)
 
-    def _undo(self, tab: _Tab) -> None:
+    def _undo(self, tab: Tab) -> None:
         with tab.lock:
             if not tab.undo:
                 tab.client.add_notification("Nothing to undo", "", auto_close_seconds=2.0)
                 return
             event_id, edge_id = tab.undo.pop()
             try:
-                self.store.undo(event_id)
+                if event_id is not None:  # a skip changed no label: going back undoes it
+                    self.store.undo(event_id)
             except ValueError as exc:
                 tab.client.add_notification("Cannot undo", str(exc), auto_close_seconds=4.0)
                 return
@@ -287,19 +254,28 @@ class Studio:
             self._claim(tab, edge_id)
             self._show(tab)
 
-    def _step(self, tab: _Tab, step: int) -> None:
+    def _step(self, tab: Tab, step: int) -> None:
         with tab.lock:
             self._move(tab, step)
 
-    def _toggle_guess(self, tab: _Tab) -> None:
+    def _toggle_guess(self, tab: Tab) -> None:
         # Setting the checkbox fires its on_update, which redraws.
         tab.panel.show_guess.value = not tab.panel.show_guess.value  # type: ignore[misc]
 
-    def _redraw(self, tab: _Tab) -> None:
+    def _redraw(self, tab: Tab) -> None:
         with tab.lock:
             self._show(tab)
 
-    def _switch_queue(self, tab: _Tab, queue: Queue) -> None:
+    def _lens_changed(self, tab: Tab) -> None:
+        with tab.lock:
+            tab.scene.lens_changed()
+
+    def _cycle_layers(self, tab: Tab) -> None:
+        with tab.lock:
+            layers = tab.scene.cycle_layers()
+            tab.panel.layers.content = layers_text(layers.value)
+
+    def _switch_queue(self, tab: Tab, queue: Queue) -> None:
         with tab.lock:
             if queue is tab.queue:
                 return
@@ -310,14 +286,14 @@ class Studio:
 
     # -- moving and showing --------------------------------------------------------------
 
-    def _claim(self, tab: _Tab, edge_id: str | None) -> None:
+    def _claim(self, tab: Tab, edge_id: str | None) -> None:
         with self._lock:
             for e in [e for e, c in self._claims.items() if c == tab.client.client_id]:
                 del self._claims[e]
             if edge_id is not None:
                 self._claims[edge_id] = tab.client.client_id
 
-    def _move(self, tab: _Tab, step: int) -> None:
+    def _move(self, tab: Tab, step: int) -> None:
         """Moves ``step`` along the queue; unlabelled queues go to the next free unlabelled edge."""
         if tab.queue.hands_out_unlabelled and step > 0:
             labels = self.store.label_map()
@@ -340,89 +316,72 @@ class Studio:
             self._claim(tab, tab.edge_id)
         self._show(tab)
 
-    def _show(self, tab: _Tab, draw_scene: bool = True) -> None:
+    def _show(self, tab: Tab, draw_scene: bool = True) -> None:
         edge_id = tab.edge_id
         labels = self.store.label_map()
         labelled = sum(1 for e in self._edge_ids if labels.get(e))
         panel = tab.panel
         with tab.client.atomic():
+            if tab.queue is Queue.conflicts:
+                panel.agreement.content = agreement_text(agreement(labels))
+            if panel.agreement.visible != (tab.queue is Queue.conflicts):
+                panel.agreement.visible = tab.queue is Queue.conflicts
             if edge_id is None:
+                tab.failed = None
                 panel.facts.content = "**This queue is empty.** Choose another queue below."
-                self._clear_scene(tab)
+                tab.scene.clear()
             else:
-                edge = self._edge(edge_id)
-                use_guess = bool(panel.show_guess.value)
-                if draw_scene:
-                    self._draw(tab, self._views.get(edge), use_guess)
-                panel.facts.content = facts_text(
-                    edge,
-                    labels.get(edge_id, {}),
-                    self._predictions.p.get(edge_id),
-                    self._predictions.threshold,
-                    use_guess,
-                )
+                self._show_edge(tab, edge_id, labels.get(edge_id, {}), draw_scene)
             panel.progress.value = 100.0 * labelled / max(len(self._edge_ids), 1)
             # Last: the position line changing tells a watcher that the whole edge is there.
             panel.position.content = position_text(
                 max(tab.index, 0), len(tab.order), labelled, len(self._edge_ids), tab.queue
-            ) + (f"  \n`{edge_id}`" if edge_id else "")
+            ) + (f"  \n{code(edge_id)}" if edge_id else "")
         self._prefetch(tab)
 
-    def _prefetch(self, tab: _Tab) -> None:
+    def _show_edge(self, tab: Tab, edge_id: str, votes: dict[str, str], draw_scene: bool) -> None:
+        """The edge's facts, and (``draw_scene``) its scene and pictures, or why it cannot be."""
+        panel = tab.panel
+        edge = self._edge(edge_id)
+        use_guess = bool(panel.show_guess.value)
+        if draw_scene or tab.failed is not None:
+            view, tab.failed = self._view_or_reason(edge)
+            if view is None:
+                tab.scene.clear()
+            else:
+                placed = view.guess if use_guess else view.estimate
+                tab.scene.show(view, placed)
+                panel.vgm.image = placed.channels_rgb
+                if view.minimap is not None:
+                    panel.minimap.image = view.minimap
+                if panel.minimap.visible != (view.minimap is not None):
+                    panel.minimap.visible = view.minimap is not None
+        notes = {r.annotator: r.note for r in self.store.labels(edge_id)} if votes else None
+        facts = facts_text(
+            edge,
+            votes,
+            self._predictions.p.get(edge_id),
+            self._predictions.threshold,
+            use_guess,
+            notes,
+        )
+        if tab.failed is not None:
+            facts = (
+                f"**This edge cannot be shown:** {plain(tab.failed)}  \n"
+                "Labels are refused for it; fix the log or press E for the next edge.\n\n" + facts
+            )
+        panel.facts.content = facts
+
+    def _view_or_reason(self, edge: Edge) -> tuple[EdgeView | None, str | None]:
+        """The edge's view, or None and one line on why its scans cannot be read."""
+        try:
+            return self._views.get(edge), None
+        except InputError as exc:
+            return None, str(exc)
+        except (OSError, ValueError) as exc:  # a log that changed under a running studio
+            return None, f"{type(exc).__name__} while reading the log of edge {edge.edge_id}"
+
+    def _prefetch(self, tab: Tab) -> None:
         upcoming = tab.order[tab.index + 1 : tab.index + 1 + PREFETCH]
         for edge_id in upcoming:
             self._prefetcher.submit(self._views.get, self._edge(edge_id))
-
-    def _draw(self, tab: _Tab, view: EdgeView, use_guess: bool) -> None:
-        """Puts the edge into the tab's scene, updating the nodes made for earlier edges.
-
-        Updating a node's data is much cheaper for the browser than removing and adding it
-        again: on a machine without a GPU that was most of a click's latency.
-        """
-        placed = view.guess if use_guess else view.estimate
-        nodes = tab.nodes
-        if not nodes:
-            scene = tab.client.scene
-            nodes["vgm"] = scene.add_image(
-                "/vgm",
-                placed.heatmap_rgb,
-                render_width=placed.heatmap_size[0],
-                render_height=placed.heatmap_size[1],
-                format="png",
-                cast_shadow=False,
-                receive_shadow=False,
-                position=(*placed.heatmap_centre, -0.01),
-            )
-            nodes["previous"] = scene.add_point_cloud(
-                "/scans/previous", view.prev, PREV_RGB, point_size=0.025
-            )
-            nodes["current"] = scene.add_point_cloud(
-                "/scans/current", placed.cur, CUR_RGB, point_size=0.025
-            )
-            nodes["reference_scan"] = scene.add_point_cloud(
-                "/reference/scan", _ONE_POINT, REFERENCE_RGB, point_size=0.02
-            )
-            segments, colours = pose_marks(placed.pose, view.reference)
-            nodes["poses"] = scene.add_line_segments(
-                "/poses", segments, colours, thickness=4.0, thickness_units="screen"
-            )
-        else:
-            image = nodes["vgm"]
-            image.image = placed.heatmap_rgb
-            image.render_width, image.render_height = placed.heatmap_size
-            image.position = (*placed.heatmap_centre, -0.01)
-            nodes["previous"].points = view.prev
-            nodes["current"].points = placed.cur
-            nodes["poses"].points, nodes["poses"].colors = pose_marks(placed.pose, view.reference)
-        for name in ("vgm", "previous", "current", "poses"):
-            if not nodes[name].visible:
-                nodes[name].visible = True
-        has_reference = view.reference is not None
-        if nodes["reference_scan"].visible != has_reference:
-            nodes["reference_scan"].visible = has_reference
-        if view.reference is not None:
-            nodes["reference_scan"].points = view.reference[1]
-
-    def _clear_scene(self, tab: _Tab) -> None:
-        for node in tab.nodes.values():
-            node.visible = False

@@ -11,6 +11,7 @@ from __future__ import annotations
 import sys
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,15 +19,20 @@ from pathlib import Path
 from vgm_studio.errors import InputError
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.studio.app import Studio, StudioConfig
+from vgm_studio.studio.gate import is_loopback
 from vgm_studio.studio.panel import trainer_text
 from vgm_studio.trainer import PromotionWatcher, TrainerSupervisor, request_training
 from vgm_studio.workspace import predict_workspace
 
 EXPOSED = (
-    "viser has no authentication: anyone who can reach {host}:{port} can read and change "
-    "these labels. Listen on 127.0.0.1 (the default) unless the network is trusted."
+    "anyone who can reach {host}:{port} and has the address above (its token) can read and "
+    "change these labels, over plain HTTP. Listen on 127.0.0.1 (the default) unless the "
+    "network is trusted."
 )
-KEYS = "  keys: S success · F failure · D skip · Z undo · Q previous · E next · G guess"
+KEYS = (
+    "  keys: S success · F failure · D skip · Z undo · Q previous · E next · G guess"
+    " · V points/VGM · R reset view"
+)
 
 
 @dataclass
@@ -79,9 +85,9 @@ def _start_trainer(studio: Studio, options: TrainerOptions) -> Callable[[], None
     return stop
 
 
-def _predict_then_refresh(studio: Studio, model: Path) -> None:
+def _predict_then_refresh(studio: Studio, model: Path, precision: float | None) -> None:
     try:
-        predict_workspace(studio.store, model)
+        predict_workspace(studio.store, model, precision=precision)
     except Exception as exc:  # a failed model must not take the labeling down
         _warn(f"{model}: no predictions ({exc})")
         return
@@ -93,13 +99,15 @@ def serve(
     config: StudioConfig,
     *,
     model: Path | None = None,
+    precision: float | None = None,
     trainer: TrainerOptions | None = None,
     ready_seconds: float | None = None,
 ) -> None:
     """Starts the studio (and the trainer beside it), says where, and serves until Ctrl-C.
 
     The model's predictions are made in the background: the annotator can start at once, and
-    p(success) appears in the panel when they are ready.
+    p(success) appears in the panel when they are ready. With ``precision`` the model's calls
+    are cut where its validation precision reaches it (``predict_workspace``).
     """
 
     def train_now() -> None:
@@ -110,12 +118,15 @@ def serve(
     stop_trainer = _start_trainer(studio, trainer) if trainer is not None else None
     if model is not None:
         threading.Thread(
-            target=_predict_then_refresh, args=(studio, model), daemon=True, name="predict"
+            target=_predict_then_refresh,
+            args=(studio, model, precision),
+            daemon=True,
+            name="predict",
         ).start()
     when = f" (ready {ready_seconds:.1f} s after start)" if ready_seconds is not None else ""
     _say(f"VGM Studio: {store.count_edges()} edges at {studio.url}{when}")
     _say(KEYS)
-    if config.host not in ("127.0.0.1", "localhost", "::1"):
+    if not is_loopback(config.host):
         _warn("  warning: " + EXPOSED.format(host=config.host, port=config.port))
     _say("  Ctrl-C stops; every label is already saved.")
     try:
@@ -128,3 +139,12 @@ def serve(
             stop_trainer()
         studio.stop()
         store.close()
+
+
+def added_text(store: LabelStore, source: Path, before: int, added: int) -> str:
+    """What a source added to a workspace that had edges: counts by kind, or none."""
+    if not added:
+        return f"{source}: already in {store.workspace}; no edges added ({before} there)"
+    kinds = Counter(edge.kind for edge in store.edges()[before:])
+    which = ", ".join(f"{n} {kind}" for kind, n in sorted(kinds.items()))
+    return f"{source}: added {added} edges ({which}) to the {before} in {store.workspace}"

@@ -13,8 +13,10 @@ from numpy.typing import NDArray
 from vgm_studio.core import se2
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
+from vgm_studio.studio.heatmap import blend, channels_panel
+from vgm_studio.studio.minimap import Trajectory, minimap, trajectory
 from vgm_studio.vgm.grid import VGMParams, pair_map
-from vgm_studio.vgm.render import CUR_BGR, PREV_BGR, heatmap
+from vgm_studio.vgm.render import CUR_BGR, PREV_BGR
 
 PREV_RGB: tuple[int, int, int] = (int(PREV_BGR[2]), int(PREV_BGR[1]), int(PREV_BGR[0]))
 CUR_RGB: tuple[int, int, int] = (int(CUR_BGR[2]), int(CUR_BGR[1]), int(CUR_BGR[0]))
@@ -27,6 +29,9 @@ class PlacedPair:
 
     pose: NDArray[np.float64]
     heatmap_rgb: NDArray[np.uint8]  # (h, w, 3) RGB, row i along +y: the occupied part of the VGM
+    channels_rgb: NDArray[np.uint8]  # the panel's picture of both channels (heatmap.channels_panel)
+    cells: NDArray[np.float32]  # (K, 3) centres of the occupied cells, metres, z just below 0
+    cell_rgb: NDArray[np.uint8]  # (K, 3) their colours in the heatmap
     heatmap_centre: tuple[float, float]  # where the crop's centre lies, metres
     cur: NDArray[np.float32]  # (M, 3) current scan in the previous scan's frame
     resolution: float  # metres per heatmap pixel (the VGM's cell size)
@@ -49,6 +54,8 @@ class EdgeView:
         guess: The pair placed by the initial guess.
         reference: The current scan's reference pose and its points there, when known.
         extent: Width of the VGM square, metres.
+        minimap: The log's trajectory with both scans marked (RGB), None when the log has
+            no poses to draw.
     """
 
     edge: Edge
@@ -57,6 +64,7 @@ class EdgeView:
     guess: PlacedPair
     reference: tuple[NDArray[np.float64], NDArray[np.float32]] | None
     extent: float
+    minimap: NDArray[np.uint8] | None = None
 
 
 def _xyz(points: NDArray[np.float64]) -> NDArray[np.float32]:
@@ -72,18 +80,45 @@ def _placed(
     vgm = pair_map(
         prev, cur, pose_arr, size=params.size, resolution=params.resolution, sigma=params.sigma
     )
-    # heatmap() is BGR with +y up for opencv; viser wants RGB with row 0 at its -y edge.
-    rgb = heatmap(vgm)[::-1, :, ::-1]
-    crop, centre = _crop(rgb, vgm, params.resolution)
+    (r0, r1, c0, c1), centre = _crop(vgm, params.resolution)
+    crop = vgm[:, r0:r1, c0:c1]
+    rgb = blend(crop)  # row 0 at the grid's -y edge, as viser draws an image's first row
+    cells, cell_rgb = _cells(crop, rgb, centre, params.resolution)
     return PlacedPair(
-        pose_arr, crop, centre, _xyz(se2.transform_points(pose_arr, cur)), params.resolution
+        pose_arr,
+        rgb,
+        channels_panel(crop),
+        cells,
+        cell_rgb,
+        centre,
+        _xyz(se2.transform_points(pose_arr, cur)),
+        params.resolution,
     )
 
 
+def _cells(
+    crop: NDArray[np.float32],
+    rgb: NDArray[np.uint8],
+    centre: tuple[float, float],
+    resolution: float,
+) -> tuple[NDArray[np.float32], NDArray[np.uint8]]:
+    """The occupied cells as points (centres, colours): drawn as squares one cell wide.
+
+    A software-rendering browser pays for every screen pixel a picture covers; the occupied
+    cells are a few percent of the crop, so squares cost a fraction of the picture.
+    """
+    rows, cols = np.nonzero((crop[0] > 0) | (crop[1] > 0))
+    h, w = crop.shape[1:]
+    out = np.full((len(rows), 3), -0.01, dtype=np.float32)
+    out[:, 0] = centre[0] + (cols + 0.5 - w / 2) * resolution
+    out[:, 1] = centre[1] + (rows + 0.5 - h / 2) * resolution
+    return out, np.ascontiguousarray(rgb[rows, cols])
+
+
 def _crop(
-    rgb: NDArray[np.uint8], vgm: NDArray[np.float32], resolution: float, margin: int = 10
-) -> tuple[NDArray[np.uint8], tuple[float, float]]:
-    """The heatmap cut down to its occupied cells and a margin, and where its centre lies.
+    vgm: NDArray[np.float32], resolution: float, margin: int = 10
+) -> tuple[tuple[int, int, int, int], tuple[float, float]]:
+    """The rows and columns of the occupied cells and a margin, and where their centre lies.
 
     The browser pays for every screen pixel an image covers, and without a GPU a 20 m square
     under a 10 m scan was most of a click's latency; the empty rest is background anyway.
@@ -91,19 +126,20 @@ def _crop(
     occupied = (vgm[0] > 0) | (vgm[1] > 0)
     size = occupied.shape[0]
     if not occupied.any():
-        return np.ascontiguousarray(rgb[:1, :1]), (0.0, 0.0)
+        return (0, 1, 0, 1), (0.0, 0.0)
     rows = np.flatnonzero(occupied.any(axis=1))  # rows run along +y in the VGM
     cols = np.flatnonzero(occupied.any(axis=0))
     r0, r1 = max(rows[0] - margin, 0), min(rows[-1] + margin + 1, size)
     c0, c1 = max(cols[0] - margin, 0), min(cols[-1] + margin + 1, size)
-    crop = np.ascontiguousarray(rgb[r0:r1, c0:c1])
     half = size / 2
     centre = ((c0 + c1) / 2 - half) * resolution, ((r0 + r1) / 2 - half) * resolution
-    return crop, (float(centre[0]), float(centre[1]))
+    return (int(r0), int(r1), int(c0), int(c1)), (float(centre[0]), float(centre[1]))
 
 
-def make_view(edge: Edge, scans: EdgeScans, params: VGMParams) -> EdgeView:
-    """Reads the edge's scans and builds both placements and the reference ghost."""
+def make_view(
+    edge: Edge, scans: EdgeScans, params: VGMParams, path: Trajectory | None = None
+) -> EdgeView:
+    """Reads the edge's scans and builds both placements, the reference ghost and the minimap."""
     a, b = scans.scans(edge)
     prev, cur = a.points(), b.points()
     reference = None
@@ -117,6 +153,7 @@ def make_view(edge: Edge, scans: EdgeScans, params: VGMParams) -> EdgeView:
         guess=_placed(prev, cur, edge.guess, params),
         reference=reference,
         extent=params.size * params.resolution,
+        minimap=None if path is None else minimap(path, edge.a, edge.b, PREV_RGB, CUR_RGB),
     )
 
 
@@ -156,6 +193,7 @@ class ViewCache:
         self._params = params
         self._capacity = capacity
         self._views: OrderedDict[str, EdgeView] = OrderedDict()
+        self._paths: dict[tuple[str, str], Trajectory | None] = {}
         self._lock = threading.Lock()
         # Logs are read once, under this lock: two threads must not parse the same log twice.
         self._read_lock = threading.Lock()
@@ -167,9 +205,16 @@ class ViewCache:
                 self._views.move_to_end(edge.edge_id)
                 return view
         with self._read_lock:
-            view = make_view(edge, self._scans, self._params)
+            view = make_view(edge, self._scans, self._params, self._trajectory(edge))
         with self._lock:
             self._views[edge.edge_id] = view
             while len(self._views) > self._capacity:
                 self._views.popitem(last=False)
         return view
+
+    def _trajectory(self, edge: Edge) -> Trajectory | None:
+        """The minimap's path of the edge's log, drawn once per log (under the read lock)."""
+        key = (edge.log_path, edge.log_sha256)
+        if key not in self._paths:
+            self._paths[key] = trajectory(self._scans.log_for(edge))
+        return self._paths[key]

@@ -14,7 +14,7 @@ import typer
 
 from vgm_studio.datasets import ReadOptions
 from vgm_studio.errors import exit_on_error
-from vgm_studio.tools import model_cmds, slam_cmd, studio_cmds, trainer_cmds
+from vgm_studio.tools import fleet_cmd, model_cmds, slam_cmd, studio_cmds, trainer_cmds
 from vgm_studio.tools.options import (
     LogArg,
     MaxLoopsOpt,
@@ -42,6 +42,26 @@ app = typer.Typer(
 
 def _warn(line: str) -> None:
     typer.echo(line, err=True)
+
+
+def _version(value: bool) -> None:
+    if value:
+        from vgm_studio import __version__
+
+        typer.echo(f"{PROG} {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", help="Print the version and exit.", is_eager=True, callback=_version
+        ),
+    ] = False,
+) -> None:
+    """Label, validate and debug 2D LiDAR scan-matching edges with Validation Grid Maps."""
 
 
 @app.command()
@@ -247,7 +267,9 @@ app.command("label")(studio_cmds.label)
 app.command("demo")(studio_cmds.demo)
 app.command("export")(studio_cmds.export)
 app.command("import")(studio_cmds.import_)
+app.command("agreement")(studio_cmds.agreement)
 app.command("slam")(slam_cmd.slam)
+app.command("fleet")(fleet_cmd.fleet)
 app.command("trainer")(trainer_cmds.trainer)
 app.command("models")(trainer_cmds.models)
 

@@ -11,6 +11,7 @@ import functools
 import inspect
 import math
 import os
+import re
 import tempfile
 from collections.abc import Callable, Sequence
 from enum import Enum
@@ -156,7 +157,27 @@ WorkspaceOpt = Annotated[Path, typer.Option(metavar="DIR", help="Workspace folde
 DeviceOpt = Annotated[Device, typer.Option(help="auto takes a GPU when there is one.")]
 PortOpt = Annotated[int, typer.Option(help="TCP port.", min=1, max=65535)]
 HostOpt = Annotated[
-    str, typer.Option(help="Interface to listen on; anything but 127.0.0.1 exposes the labels.")
+    str,
+    typer.Option(
+        help="Interface to listen on; anything but loopback needs the token in the address."
+    ),
+]
+
+
+def _token(value: str | None) -> str | None:
+    if value is not None and not re.fullmatch(r"[A-Za-z0-9_-]{8,128}", value):
+        raise typer.BadParameter("8 to 128 letters, digits, '-' or '_' (it goes in the URL)")
+    return value
+
+
+TokenOpt = Annotated[
+    str | None,
+    typer.Option(
+        metavar="TOKEN",
+        help="Required in the studio's address (http://HOST:PORT/TOKEN).",
+        show_default="none on loopback, else one made up and printed",
+        callback=_token,
+    ),
 ]
 AnnotatorOpt = Annotated[
     str | None, typer.Option(help="Your name on the labels.", show_default="your login")

@@ -61,6 +61,15 @@ def slam(
             callback=number(0, 1),
         ),
     ] = 0.8,
+    loop_precision: Annotated[
+        float,
+        typer.Option(
+            help="Loop edges also need the p(success) cut at which the model's validation "
+            "precision reaches this, in [0, 1] (e.g. 0.99); with --loop-threshold the higher "
+            "cut wins (0: off).",
+            callback=number(0, 1),
+        ),
+    ] = 0.0,
     robust: Annotated[
         RobustChoice,
         typer.Option(help="Back-end outlier handling: none, huber kernels, or gnc (TLS)."),
@@ -165,6 +174,7 @@ def slam(
             validator=validator,
             model=validator_model(validator, model),
             loop_threshold=loop_threshold or None,
+            loop_precision=loop_precision or None,
         ),
         consistency=ConsistencyConfig(enabled=consistency is ConsistencyChoice.pcm),
         graph=GraphConfig(robust=robust.value),

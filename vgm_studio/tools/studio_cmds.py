@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import errno
+import socket
 import time
 from pathlib import Path
 from typing import Annotated
@@ -9,6 +11,7 @@ from typing import Annotated
 import typer
 
 from vgm_studio.datasets import ReadOptions
+from vgm_studio.errors import InputError
 from vgm_studio.tools.options import (
     AnnotatorOpt,
     HostOpt,
@@ -16,10 +19,22 @@ from vgm_studio.tools.options import (
     NoTrainerOpt,
     PortOpt,
     RetrainOpt,
+    TimeToleranceOpt,
+    TokenOpt,
+    WorkspaceOpt,
+    number,
     with_read_options,
 )
 
 DemoWorkspaceOpt = Annotated[Path, typer.Option(metavar="DIR", help="Workspace folder.")]
+LoopPrecisionOpt = Annotated[
+    float,
+    typer.Option(
+        help="Cut the model's calls (what it says, the model-disagrees queue) where its "
+        "validation precision reaches this, in [0, 1] (0: the checkpoint's threshold).",
+        callback=number(0, 1),
+    ),
+]
 
 
 def _warn(line: str) -> None:
@@ -45,6 +60,7 @@ def label(
     ] = None,
     port: PortOpt = 8080,
     host: HostOpt = "127.0.0.1",
+    token: TokenOpt = None,
     annotator: AnnotatorOpt = None,
     model: Annotated[
         Path | None,
@@ -57,6 +73,7 @@ def label(
     no_model: Annotated[bool, typer.Option("--no-model", help="Show no model predictions.")] = (
         False
     ),
+    loop_precision: LoopPrecisionOpt = 0.0,
     no_trainer: NoTrainerOpt = False,
     retrain_every: RetrainOpt = 25,
     base: Annotated[
@@ -67,36 +84,74 @@ def label(
     time_offset: Annotated[
         float, typer.Option(help="Seconds added to a reference log's timestamps.")
     ] = 0.0,
+    time_tolerance: TimeToleranceOpt = 0.05,
 ) -> None:
     """Serve a log's candidate edges (or an edges file) in the browser for labeling."""
     from vgm_studio.labels.store import LabelStore
     from vgm_studio.studio.app import StudioConfig, check_port_free, default_annotator
-    from vgm_studio.studio.serve import TrainerOptions, serve
+    from vgm_studio.studio.serve import TrainerOptions, added_text, serve
     from vgm_studio.workspace import choose_model, fill_workspace
 
     start = time.perf_counter()
+    check_host(host)
     check_port_free(host, port)
     store = LabelStore(workspace or Path(f"{source.stem}.studio"))
-    fill_workspace(
-        store, source, reference, read, max_loops, time_offset, say=typer.echo, warn=_warn
+    before = store.count_edges()
+    added = fill_workspace(
+        store,
+        source,
+        reference,
+        read,
+        max_loops,
+        time_offset,
+        time_tolerance=time_tolerance,
+        say=typer.echo,
+        warn=_warn,
     )
+    if before:  # an existing workspace: say what this source changed in it
+        typer.echo(added_text(store, source, before, added))
     serve(
         store,
-        StudioConfig(host=host, port=port, annotator=annotator or default_annotator()),
-        model=choose_model(model, no_model, warn=_warn),
+        StudioConfig(host=host, port=port, annotator=annotator or default_annotator(), token=token),
+        model=choose_model(model, no_model, precision=loop_precision or None, warn=_warn),
+        precision=loop_precision or None,
         trainer=None if no_trainer else TrainerOptions.checked(retrain_every, base),
         ready_seconds=time.perf_counter() - start,
     )
+
+
+def check_host(host: str) -> None:
+    """Refuses a ``--host`` that is not a name or address of this machine, in those words.
+
+    Raises:
+        InputError: The name does not resolve, or no interface of this machine has it.
+    """
+    try:
+        family, kind, _, _, address = socket.getaddrinfo(host, 0, type=socket.SOCK_STREAM)[0]
+    except (socket.gaierror, UnicodeError):
+        raise InputError(f"--host {host}", "is not a name or address that resolves") from None
+    with socket.socket(family, kind) as probe:
+        try:
+            probe.bind(address)
+        except OSError as exc:
+            if exc.errno == errno.EADDRNOTAVAIL:
+                raise InputError(
+                    f"--host {host}",
+                    "is not an address of this machine; listen on 127.0.0.1 (this machine "
+                    "only), 0.0.0.0 (every interface) or one of this machine's addresses",
+                ) from None
 
 
 def demo(
     workspace: DemoWorkspaceOpt = Path("vgm-demo"),
     port: PortOpt = 8080,
     host: HostOpt = "127.0.0.1",
+    token: TokenOpt = None,
     annotator: AnnotatorOpt = None,
     serve_app: Annotated[
         bool, typer.Option("--serve/--no-serve", help="Serve the studio (else prepare and exit).")
     ] = True,
+    loop_precision: LoopPrecisionOpt = 0.0,
     no_trainer: NoTrainerOpt = False,
     retrain_every: RetrainOpt = 25,
 ) -> None:
@@ -107,8 +162,12 @@ def demo(
 
     start = time.perf_counter()
     if serve_app:
+        check_host(host)
         check_port_free(host, port)
-    store, model = open_demo(workspace, predict=not serve_app, say=typer.echo, warn=_warn)
+    precision = loop_precision or None
+    store, model = open_demo(
+        workspace, predict=not serve_app, precision=precision, say=typer.echo, warn=_warn
+    )
     if not serve_app:
         seconds = time.perf_counter() - start
         typer.echo(f"workspace {workspace} ready: {store.count_edges()} edges ({seconds:.1f} s)")
@@ -116,8 +175,9 @@ def demo(
         return
     serve(
         store,
-        StudioConfig(host=host, port=port, annotator=annotator or default_annotator()),
+        StudioConfig(host=host, port=port, annotator=annotator or default_annotator(), token=token),
         model=model,
+        precision=precision,
         trainer=None if no_trainer else TrainerOptions.checked(retrain_every, None),
         ready_seconds=time.perf_counter() - start,
     )
@@ -147,3 +207,19 @@ def import_(
     for path in files:
         edges, labels = import_labels(store, path)
         typer.echo(f"{path}: {labels} labels added or updated, {edges} new edges")
+
+
+def agreement(workspace: WorkspaceOpt) -> None:
+    """Cohen's kappa and the shared edges of every pair of annotators in a workspace."""
+    from vgm_studio.labels.agreement import agreement as pairs_of
+    from vgm_studio.labels.agreement import agreement_lines
+    from vgm_studio.labels.store import LabelStore
+
+    store = LabelStore(workspace, create=False)
+    pairs = pairs_of(store.label_map())
+    store.close()
+    if not pairs:
+        typer.echo(f"{workspace}: no edge has labels of two annotators yet")
+        return
+    for line in agreement_lines(pairs):
+        typer.echo(line)
