@@ -149,11 +149,6 @@ def still_bag(tmp_path: Path) -> Path:
     )
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="slam --record on one keyframe crashes in recording/ (bitwise_and on an empty float "
-    "array); the loop-search branch fixes recording/",
-)
 def test_still_robot_slam_record_exits_zero(tmp_path: Path) -> None:
     from rerun.chunk import RrdReader
 
