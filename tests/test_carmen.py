@@ -86,6 +86,26 @@ def test_corrected_log_reference_from_flaser_odometry_from_odom(tmp_path):
     assert forced.pose_source == "odometry" and not forced.has_reference
 
 
+def test_corrected_log_skips_gmapping_echo_and_takes_the_odom_after_the_scan(tmp_path):
+    # GMapping's layout: the scan (corrected pose), its pose again as ODOM, NEFF, then the raw
+    # odometry; the raw ODOM right after a scan is its odometry, the echo is none.
+    lines = []
+    for i in range(3):
+        lines.append(flaser([1.0] * 180, (i, 1, 0.1), (i, 1, 0.1), 0.0))
+        lines.append(f"ODOM {i} 1 0.1 0 0 0 0 host 0")
+        lines.append("NEFF 12.5")
+        lines += [f"ODOM {10 * i + 5 + k} 0 0 0 0 0 7 host 7" for k in range(2)]
+    # Two scans with only their echoes after them: the first takes the raw ODOM read since the
+    # scan before it, the second has none.
+    for i in (3, 4):
+        lines.append(flaser([1.0] * 180, (i, 1, 0.1), (i, 1, 0.1), 0.0))
+        lines.append(f"ODOM {i} 1 0.1 0 0 0 0 host 0")
+    log = open_log(write(tmp_path, lines, "b.gfs.log"))
+    assert log.pose_source == "reference"
+    assert [s.odometry[0] for s in log.scans[:4]] == [5, 15, 25, 26]  # type: ignore[index]
+    assert log.scans[4].odometry is None and not log.has_odometry
+
+
 def test_truepos_gives_reference_interpolated_by_time(tmp_path):
     lines = [
         format_pose_message("TRUEPOS", (0, 0, 0), (0, 0, 0), 0.0),

@@ -54,6 +54,10 @@ class RawScan:
     max_range: float | None
     pose: NDArray[np.float64]
     odom_before: NDArray[np.float64] | None
+    # The first ODOM after the scan that is not GMapping's echo of its pose (corrected logs).
+    odom_after: NDArray[np.float64] | None = None
+    echoed: bool = False  # an ODOM line repeating the scan's pose followed it (GMapping output)
+    fresh_odom: bool = False  # odom_before came after the scan before this one
 
 
 class LineParser:
