@@ -207,6 +207,7 @@ _READ_PARAMETERS: tuple[tuple[str, Any, Any], ...] = (
     ("odom_topic", Annotated[str | None, typer.Option(help="ROS bags: Odometry topic.")], None),
 )
 
+
 def _read_options(values: dict[str, Any]) -> ReadOptions:
     return ReadOptions(
         poses=values["poses"].value,
