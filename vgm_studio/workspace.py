@@ -21,7 +21,6 @@ from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.model.checkpoint import load_checkpoint
 from vgm_studio.model.registry import BUNDLED_MODEL
 from vgm_studio.model.validator import Validator
-from vgm_studio.trainer.registry import list_models
 
 REPO = Path(__file__).resolve().parents[1]
 DEMO_LOG = REPO / "datasets" / "demo-seed0.log"
@@ -99,7 +98,7 @@ def predict_workspace(store: LabelStore, model: Path, *, say: Say = _quiet) -> N
 
     A workspace whose trainer has versions keeps the active one: nothing is done then.
     """
-    if list_models(store):
+    if store.versions.all():
         return
     key = f"{model.name}:{content_hash(model)[:12]}"
     current = store.predictions()
