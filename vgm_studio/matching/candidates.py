@@ -98,7 +98,8 @@ def loop_pairs(
     pairs = pairs[(b - a >= config.min_gap) & (dtheta <= math.radians(config.max_angle_deg))]
     pairs = pairs[_sample(len(pairs), config)]
     order = np.lexsort((pairs[:, 1], pairs[:, 0]))
-    return pairs[order]
+    ordered: NDArray[np.int64] = pairs[order]
+    return ordered
 
 
 def _sample(count: int, config: CandidateConfig) -> NDArray[np.int64]:
@@ -113,7 +114,8 @@ def _noise(config: CandidateConfig, count: int) -> NDArray[np.float64]:
     # A stream of its own, so the noise of an edge does not depend on how pairs were sampled.
     rng = np.random.default_rng([config.seed, 1])
     sd = np.array([config.noise_xy, config.noise_xy, math.radians(config.noise_theta_deg)])
-    return rng.normal(size=(count, 3)) * sd
+    noise: NDArray[np.float64] = rng.normal(size=(count, 3)) * sd
+    return noise
 
 
 def plan_pairs(

@@ -130,7 +130,7 @@ def train_step(
     y = torch.from_numpy(labels.astype(np.float32)).to(device)
     loss = nn.functional.binary_cross_entropy_with_logits(forward(net, x, extra), y)
     optimiser.zero_grad(set_to_none=True)
-    loss.backward()
+    loss.backward()  # type: ignore[no-untyped-call]
     optimiser.step()
     schedule.step()
     return float(loss.detach())
@@ -169,49 +169,18 @@ def fit_network(
     Returns:
         The best epoch's weights (the last one's when nothing is held out) and its figures.
     """
-    rng = np.random.default_rng(recipe.seed)
-    optimiser = torch.optim.Adam(net.parameters(), lr=recipe.lr, weight_decay=recipe.weight_decay)
-    per_epoch = recipe.epoch_size or len(rows.train)
-    steps = math.ceil(per_epoch / recipe.batch_size)
-    schedule = torch.optim.lr_scheduler.OneCycleLR(
-        optimiser, recipe.lr, total_steps=recipe.epochs * steps
-    )
-    val_samples = [rows.samples[i] for i in rows.val]
-    val_labels = rows.labels[rows.val]
+    run = _Run(net, spec, rows, recipe, device)
     best_loss, best_state, stale = math.inf, copy.deepcopy(net.state_dict()), 0
     history: list[dict[str, float]] = []
     if on_epoch:
         on_epoch(0, recipe.epochs)
     for epoch in range(1, recipe.epochs + 1):
-        t0 = time.perf_counter()
-        net.train()
-        draws = rows.train[balanced_draws(rows.labels[rows.train], per_epoch, rng)]
-        bar = tqdm(
-            range(steps),
-            desc=f"epoch {epoch}/{recipe.epochs}",
-            unit="batch",
-            disable=None if progress else True,
-            leave=False,
-        )
-        total = 0.0
-        for step in bar:
-            idx = draws[step * recipe.batch_size : (step + 1) * recipe.batch_size]
-            rot = rng.uniform(0, 2 * np.pi, len(idx)) if recipe.augment else None
-            batch = [rows.samples[i] for i in idx]
-            total += train_step(
-                net, spec, batch, rows.labels[idx], rot, optimiser, schedule, device
-            )
-            bar.set_postfix(loss=f"{total / (step + 1):.3f}")
-        record = {"epoch": epoch, "train_loss": total / steps}
-        if len(val_labels):
-            record |= _validation(net, spec, val_samples, val_labels, device)
-            val_loss = record["val_loss"]
-        else:  # nothing held out: the last epoch is the best we know
-            val_loss = -float(epoch)
-        record["seconds"] = time.perf_counter() - t0
+        record = run.epoch(epoch, progress)
         history.append(record)
         if log is not None:
             log(_epoch_line(record))
+        # Nothing held out: the last epoch is the best we know.
+        val_loss = record.get("val_loss", -float(epoch))
         if val_loss < best_loss - 1e-4:
             best_loss, best_state, stale = val_loss, copy.deepcopy(net.state_dict()), 0
         else:
@@ -223,7 +192,64 @@ def fit_network(
                 log(f"stopping: no better validation loss for {recipe.patience} epochs")
             break
     net.load_state_dict(best_state)
-    return _judged(net, spec, val_samples, val_labels, device, best_state, history)
+    return _judged(net, spec, run.val_samples, run.val_labels, device, best_state, history)
+
+
+class _Run:
+    """One training run's moving parts: the optimiser, its schedule and the draws' generator."""
+
+    def __init__(
+        self, net: nn.Module, spec: InputSpec, rows: Rows, recipe: Recipe, device: torch.device
+    ) -> None:
+        self.net, self.spec, self.rows, self.recipe, self.device = net, spec, rows, recipe, device
+        self.rng = np.random.default_rng(recipe.seed)
+        self.optimiser = torch.optim.Adam(
+            net.parameters(), lr=recipe.lr, weight_decay=recipe.weight_decay
+        )
+        self.per_epoch = recipe.epoch_size or len(rows.train)
+        self.steps = math.ceil(self.per_epoch / recipe.batch_size)
+        self.schedule = torch.optim.lr_scheduler.OneCycleLR(
+            self.optimiser, recipe.lr, total_steps=recipe.epochs * self.steps
+        )
+        self.val_samples = [rows.samples[i] for i in rows.val]
+        self.val_labels = rows.labels[rows.val]
+
+    def epoch(self, epoch: int, progress: bool) -> dict[str, float]:
+        """Trains one epoch of class-balanced draws; returns its losses and seconds."""
+        t0 = time.perf_counter()
+        rows, size = self.rows, self.recipe.batch_size
+        self.net.train()
+        draws = rows.train[balanced_draws(rows.labels[rows.train], self.per_epoch, self.rng)]
+        bar = tqdm(
+            range(self.steps),
+            desc=f"epoch {epoch}/{self.recipe.epochs}",
+            unit="batch",
+            disable=None if progress else True,
+            leave=False,
+        )
+        total = 0.0
+        for step in bar:
+            idx = draws[step * size : (step + 1) * size]
+            rot = self.rng.uniform(0, 2 * np.pi, len(idx)) if self.recipe.augment else None
+            batch = [rows.samples[i] for i in idx]
+            total += train_step(
+                self.net,
+                self.spec,
+                batch,
+                rows.labels[idx],
+                rot,
+                self.optimiser,
+                self.schedule,
+                self.device,
+            )
+            bar.set_postfix(loss=f"{total / (step + 1):.3f}")
+        record = {"epoch": epoch, "train_loss": total / self.steps}
+        if len(self.val_labels):
+            record |= _validation(
+                self.net, self.spec, self.val_samples, self.val_labels, self.device
+            )
+        record["seconds"] = time.perf_counter() - t0
+        return record
 
 
 def _validation(

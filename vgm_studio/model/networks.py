@@ -46,7 +46,8 @@ class _PooledHead(nn.Module):
         parts = [x.mean(dim=(2, 3)), x.amax(dim=(2, 3))]
         if extra is not None:
             parts.append(extra)
-        return self.mlp(torch.cat(parts, dim=1)).squeeze(1)
+        logit: torch.Tensor = self.mlp(torch.cat(parts, dim=1)).squeeze(1)
+        return logit
 
 
 @dataclass(frozen=True)
@@ -73,7 +74,8 @@ class VGMNetPaper(nn.Module):
         self.head = _PooledHead(width, c.hidden, c.dropout)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.head(self.features(x))
+        logit: torch.Tensor = self.head(self.features(x))
+        return logit
 
 
 @dataclass(frozen=True)
@@ -130,7 +132,8 @@ class VGMNet(nn.Module):
             else:
                 x = x.pow(self.lift)
             x = self.fold(x)
-        return self.head(self.features(x), extra)
+        logit: torch.Tensor = self.head(self.features(x), extra)
+        return logit
 
 
 @dataclass(frozen=True)
@@ -154,4 +157,5 @@ class RGBNet(nn.Module):
         self.head = _PooledHead(width, c.hidden, c.dropout)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.head(self.features(x))
+        logit: torch.Tensor = self.head(self.features(x))
+        return logit

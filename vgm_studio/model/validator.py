@@ -103,7 +103,8 @@ def input_spec(model: str, hyper: dict[str, Any], vgm: VGMParams) -> InputSpec:
 
 def forward(net: nn.Module, x: torch.Tensor, extra: torch.Tensor | None) -> torch.Tensor:
     """One forward pass; networks built without matcher figures take the image alone."""
-    return net(x, extra) if extra is not None else net(x)
+    logits: torch.Tensor = net(x, extra) if extra is not None else net(x)
+    return logits
 
 
 def batched_logits(

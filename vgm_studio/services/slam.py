@@ -15,7 +15,7 @@ from vgm_studio.graph.metrics import RelationErrors
 from vgm_studio.maps.png import write_maps
 from vgm_studio.model.registry import BUNDLED_MODEL, VALIDATOR_MODELS
 from vgm_studio.recording import write_recording
-from vgm_studio.services import Say, quiet
+from vgm_studio.services import Say, Voice
 from vgm_studio.slam.config import SlamConfig
 from vgm_studio.slam.pipeline import SlamResult, run_slam
 from vgm_studio.slam.report import edge_line, errors_of, run_maps, summary, table
@@ -64,8 +64,7 @@ def run_slam_command(
     relations: Path | None = None,
     join: JoinOptions | None = None,
     outputs: SlamOutputs | None = None,
-    say: Say = quiet,
-    warn: Say = quiet,
+    voice: Voice | None = None,
 ) -> None:
     """Reads the log, runs SLAM, scores it against relations and writes what ``outputs`` asks.
 
@@ -74,9 +73,11 @@ def run_slam_command(
     """
     start = time.perf_counter()
     outputs = outputs or SlamOutputs()
+    voice = voice or Voice()
+    say = voice.say
     source = read_slam_source(log, read, reference, relations, join)
     for line in source.warnings:
-        warn(line)
+        voice.warn(line)
     result = run_slam(source.log, config)
     say(edge_line(result))
     errors = errors_of(result, source.relations) if source.relations is not None else None

@@ -107,7 +107,8 @@ def summary(
             "settings": settings,
         }
     )
-    return _finite(out)
+    finite: dict[str, Any] = _finite(out)
+    return finite
 
 
 def _finite(value: Any) -> Any:
