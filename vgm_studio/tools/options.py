@@ -166,6 +166,12 @@ NoTrainerOpt = Annotated[
 RetrainOpt = Annotated[
     int, typer.Option(help="The trainer trains after this many new labels.", min=1)
 ]
+MinHeldOutOpt = Annotated[
+    int,
+    typer.Option(
+        min=1, help="Held-out labels of each class a version needs before it is promoted."
+    ),
+]
 
 # The read options, in the order ``--help`` shows them; ``with_read_options`` adds them.
 _READ_PARAMETERS: tuple[tuple[str, Any, Any], ...] = (

@@ -13,6 +13,7 @@ from vgm_studio.tools.options import (
     AnnotatorOpt,
     HostOpt,
     MaxLoopsOpt,
+    MinHeldOutOpt,
     NoTrainerOpt,
     PortOpt,
     RetrainOpt,
@@ -59,6 +60,7 @@ def label(
     ),
     no_trainer: NoTrainerOpt = False,
     retrain_every: RetrainOpt = 25,
+    min_held_out: MinHeldOutOpt = 20,
     base: Annotated[
         list[Path] | None,
         typer.Option("--base", metavar="EDGES.jsonl", help="Labelled edges the trainer also uses."),
@@ -84,7 +86,7 @@ def label(
         store,
         StudioConfig(host=host, port=port, annotator=annotator or default_annotator()),
         model=choose_model(model, no_model, warn=_warn),
-        trainer=None if no_trainer else TrainerOptions.checked(retrain_every, base),
+        trainer=None if no_trainer else TrainerOptions.checked(retrain_every, base, min_held_out),
         ready_seconds=time.perf_counter() - start,
     )
 
