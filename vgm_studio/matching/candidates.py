@@ -209,8 +209,10 @@ def make_candidates(
     config = config or CandidateConfig()
     thresholds = thresholds or LabelThresholds()
     pairs, notes = plan_pairs(log, config, relations, progress)
+    mount = log.mount
     recorded = {
         **(params or {}),
+        "mount": None if mount is None else {**mount.to_json(), "source": log.mount_source},
         "candidates": asdict(config),
         "labels": asdict(thresholds),
         "matcher": asdict(matcher.config),
@@ -240,7 +242,10 @@ def _matched(
     if p.reference is not None:
         label = reference_label(p.reference, estimate, thresholds)
     return Edge(
-        edge_id=edge_id(log.content_hash, p.a, p.b, estimate),
+        # A scan pair matched under another laser mount is another edge.
+        edge_id=edge_id(
+            log.content_hash, p.a, p.b, estimate, "" if log.mount is None else log.mount.id_text()
+        ),
         log_path=log_path,
         log_sha256=log.content_hash,
         a=p.a,
