@@ -136,20 +136,19 @@ def test_a_bad_import_line_names_file_and_line_and_changes_nothing(store, tmp_pa
         import_labels(fresh, txt)
 
 
-def test_a_snapshot_read_does_not_wait_for_another_process_writing(store):
+def test_a_status_read_does_not_wait_for_another_process_writing(store):
     import time
 
+    store.trainer.report({"state": "idle"})  # the trainer's tables exist
     # Another process (the trainer) holds the write lock, mid-way through storing a version.
     writer = sqlite3.connect(store.path, isolation_level=None)
     writer.execute("BEGIN IMMEDIATE")
-    writer.execute("INSERT INTO meta VALUES ('pending', 'x')")
+    writer.execute("INSERT INTO meta VALUES ('active_model', 'v9')")
     start = time.perf_counter()
-    with store.snapshot() as db:
-        count = db.execute("SELECT COUNT(*) FROM edges").fetchone()[0]
-        pending = db.execute("SELECT 1 FROM meta WHERE key = 'pending'").fetchone()
+    view = store.trainer.view()
+    count = store.count_edges()
     assert time.perf_counter() - start < 0.5
-    assert count == store.count_edges() > 0 and pending is None  # not the uncommitted row
+    assert count > 0 and view.active_model is None  # not the uncommitted row
     writer.execute("COMMIT")
-    with store.snapshot() as db:
-        assert db.execute("SELECT value FROM meta WHERE key = 'pending'").fetchone() == ("x",)
+    assert store.trainer.view().active_model == "v9"
     writer.close()

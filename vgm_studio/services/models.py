@@ -110,7 +110,7 @@ def _figure(metrics: dict[str, Any], key: str) -> str:
 def models_table(records: list[ModelRecord]) -> str:
     """The versions as a Markdown-like table: held-out figures, labels, time, promotion."""
     header = ["version", "created (UTC)", "labels", "held out", "accuracy", "F1", "AUC", "cut"]
-    header += ["seconds", "status"]
+    header += ["seconds", "status", "why"]
     rows = []
     for m in records:
         held = m.metrics.get("counts", {}).get("held_out", {})
@@ -124,6 +124,7 @@ def models_table(records: list[ModelRecord]) -> str:
                 *(_figure(m.metrics, k) for k in ("accuracy", "f1", "auc", "threshold")),
                 f"{m.seconds:.0f}",
                 status,
+                str(m.metrics.get("compared", {}).get("reason", "")),
             ]
         )
     widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]

@@ -188,6 +188,12 @@ NoTrainerOpt = Annotated[
 RetrainOpt = Annotated[
     int, typer.Option(help="The trainer trains after this many new labels.", min=1)
 ]
+MinHeldOutOpt = Annotated[
+    int,
+    typer.Option(
+        min=1, help="Held-out labels of each class a version needs before it is promoted."
+    ),
+]
 
 
 def _laser_pose(value: str | None) -> tuple[float, float, float] | None:

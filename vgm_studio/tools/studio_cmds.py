@@ -11,11 +11,13 @@ from typing import Annotated
 import typer
 
 from vgm_studio.datasets import ReadOptions
+from vgm_studio.datasets.source import JoinOptions
 from vgm_studio.errors import InputError
 from vgm_studio.tools.options import (
     AnnotatorOpt,
     HostOpt,
     MaxLoopsOpt,
+    MinHeldOutOpt,
     NoTrainerOpt,
     PortOpt,
     RetrainOpt,
@@ -76,6 +78,7 @@ def label(
     loop_precision: LoopPrecisionOpt = 0.0,
     no_trainer: NoTrainerOpt = False,
     retrain_every: RetrainOpt = 25,
+    min_held_out: MinHeldOutOpt = 20,
     base: Annotated[
         list[Path] | None,
         typer.Option("--base", metavar="EDGES.jsonl", help="Labelled edges the trainer also uses."),
@@ -103,8 +106,7 @@ def label(
         reference,
         read,
         max_loops,
-        time_offset,
-        time_tolerance=time_tolerance,
+        JoinOptions(time_tolerance=time_tolerance, time_offset=time_offset),
         say=typer.echo,
         warn=_warn,
     )
@@ -115,7 +117,7 @@ def label(
         StudioConfig(host=host, port=port, annotator=annotator or default_annotator(), token=token),
         model=choose_model(model, no_model, precision=loop_precision or None, warn=_warn),
         precision=loop_precision or None,
-        trainer=None if no_trainer else TrainerOptions.checked(retrain_every, base),
+        trainer=None if no_trainer else TrainerOptions.checked(retrain_every, base, min_held_out),
         ready_seconds=time.perf_counter() - start,
     )
 

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from vgm_studio.errors import InputError
-from vgm_studio.tools.options import WorkspaceOpt
+from vgm_studio.tools.options import MinHeldOutOpt, WorkspaceOpt
 
 
 def trainer(
@@ -25,10 +25,12 @@ def trainer(
     ] = False,
     epochs: Annotated[int, typer.Option(min=1, help="Epochs at most per version.")] = 12,
     epoch_size: Annotated[int, typer.Option(min=1, help="Class-balanced draws per epoch.")] = 1024,
+    min_held_out: MinHeldOutOpt = 20,
 ) -> None:
     """Train model versions from a workspace's labels as they come in (runs until Ctrl-C)."""
     from vgm_studio.trainer.fit import FitConfig
     from vgm_studio.trainer.process import run_trainer
+    from vgm_studio.trainer.promotion import PromotionRule
     from vgm_studio.trainer.worker import TrainerConfig
 
     config = TrainerConfig(
@@ -36,6 +38,7 @@ def trainer(
         base=tuple(base or ()),
         from_scratch=from_scratch,
         fit=FitConfig(epochs=epochs, epoch_size=epoch_size),
+        promotion=PromotionRule(min_per_class=min_held_out),
     )
     run_trainer(workspace, config)
 

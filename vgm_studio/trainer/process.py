@@ -15,6 +15,7 @@ from typing import Any
 
 from vgm_studio.errors import InputError, exit_on_error
 from vgm_studio.trainer.fit import FitConfig
+from vgm_studio.trainer.promotion import PromotionRule
 from vgm_studio.trainer.worker import Stop, TrainerConfig, Worker
 
 PROG = "vgm-studio trainer"
@@ -70,6 +71,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--from-scratch", action="store_true")
     parser.add_argument("--epochs", type=int, default=fit.epochs)
     parser.add_argument("--epoch-size", type=int, default=fit.epoch_size)
+    parser.add_argument("--min-held-out", type=int, default=PromotionRule.min_per_class)
     parser.add_argument("--parent-pid", type=int, default=None)
     return parser
 
@@ -82,5 +84,6 @@ def main(argv: Sequence[str] | None = None) -> None:
         base=tuple(args.base),
         from_scratch=args.from_scratch,
         fit=FitConfig(epochs=args.epochs, epoch_size=args.epoch_size),
+        promotion=PromotionRule(min_per_class=args.min_held_out),
     )
     exit_on_error(PROG, lambda: run_trainer(args.workspace, config, args.parent_pid))

@@ -33,7 +33,7 @@ class Backoff:
     healthy: float = 60.0
 
     def pause(self, failures: int) -> float:
-        return min(self.first * 2 ** max(failures - 1, 0), self.longest)
+        return float(min(self.first * 2 ** max(failures - 1, 0), self.longest))
 
 
 class TrainerSupervisor:
