@@ -13,7 +13,8 @@ import psycopg
 import pytest
 
 from vgm_studio.errors import InputError
-from vgm_studio.labels.postgres import PgLabelStore, is_store_url
+from vgm_studio.labels.opening import is_store_url
+from vgm_studio.labels.postgres import PgLabelStore
 from vgm_studio.matching.edges import read_edges
 
 

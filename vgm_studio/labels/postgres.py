@@ -47,7 +47,6 @@ from vgm_studio.labels.store import LabelStore
 from vgm_studio.labels.trainer_tables import TrainerTables
 from vgm_studio.labels.versions import ModelVersions
 
-URL_PREFIXES = ("postgresql://", "postgres://")
 # Advisory lock keys (any two 32-bit numbers that are ours): writers, and the one trainer.
 _WRITE_LOCK = (0x56474D, 1)
 _TRAINER_LOCK = (0x56474D, 2)
@@ -114,11 +113,6 @@ _COLUMNS = {
 _INSERT_OR = re.compile(r"^\s*INSERT OR (IGNORE|REPLACE) INTO (\w+)", re.IGNORECASE)
 _RETURNS_ID = re.compile(r"^\s*INSERT INTO (events|train_requests)\b", re.IGNORECASE)
 T = TypeVar("T")
-
-
-def is_store_url(location: str | Path) -> bool:
-    """Whether ``location`` names a PostgreSQL store rather than a workspace folder."""
-    return isinstance(location, str) and location.startswith(URL_PREFIXES)
 
 
 def _dialect(sql: str) -> str:

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from vgm_studio.errors import InputError
+from vgm_studio.labels.opening import store_url
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.studio.app import Studio, StudioConfig
 from vgm_studio.studio.panel import trainer_text
@@ -63,7 +64,12 @@ def _start_trainer(studio: Studio, options: TrainerOptions) -> Callable[[], None
     Returns:
         A function that stops both.
     """
-    supervisor = TrainerSupervisor(studio.store.workspace, options.retrain_every, options.base)
+    supervisor = TrainerSupervisor(
+        studio.store.workspace,
+        options.retrain_every,
+        options.base,
+        url=store_url(studio.store),
+    )
     watcher = PromotionWatcher(
         studio.store,
         on_promote=lambda _name: studio.refresh_predictions(),
