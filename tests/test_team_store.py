@@ -108,3 +108,61 @@ def test_one_trainer_per_store(url, tmp_path):
     first.close()  # the lock goes with the connection, as with a killed trainer
     second.trainer_lock()
     second.close()
+
+
+def test_a_trainer_on_a_team_store_registers_versions_next_to_it_and_is_alone(
+    pg_server, office_edges, tmp_path
+):
+    from typer.testing import CliRunner
+
+    from tests.test_trainer import FAST, SMALL, _balanced, _models_app
+    from vgm_studio.trainer import registry
+    from vgm_studio.trainer.worker import Job, TrainerConfig, Worker
+
+    url = pg_server("trainer")
+    models = tmp_path / "team.models"
+    store = PgLabelStore(url, models_dir=models)
+    edges = _balanced(office_edges)
+    store.add_edges(edges)
+    for e in edges:
+        store.label(e.edge_id, "bot", str(e.label))
+    store.set_predictions("before", {e.edge_id: 0.5 for e in edges}, 0.5)
+    config = TrainerConfig(nice=0, fit=FAST, promotion=SMALL)
+    worker = Worker(models, config, log=lambda _s: None, url=url)
+    with pytest.raises(InputError, match="another trainer"):
+        Worker(models, config, log=lambda _s: None, url=url)
+    assert worker.cycle(Job(from_scratch=False, request=0)) == 1
+    # Another server on the same database sees the version and its predictions.
+    [v1] = registry.list_models(store)
+    assert v1.path == models / "models" / "v1.pt" and v1.path.is_file()
+    assert store.predictions().model == ("v1" if v1.promoted else "before")
+    listed = CliRunner().invoke(
+        _models_app(), ["--store", url, "--models-dir", str(models)], catch_exceptions=False
+    )
+    assert "v1" in listed.output
+    worker.store.close()
+    store.close()
+
+
+def test_the_commands_take_a_store_url_in_place_of_a_workspace(pg_server, office_edges, tmp_path):
+    from tests.test_cli_checks import one_line_error, run
+
+    url = pg_server("cli")
+    store = PgLabelStore(url, models_dir=tmp_path)
+    store.add_edges(read_edges(office_edges))
+    store.label(store.edge_ids()[0], "ana", "success")
+    store.close()
+    out = tmp_path / "labels.jsonl"
+    proc = run("export", "--store", url, "--out", out)
+    assert proc.returncode == 0 and "wrote 1 labels" in proc.stdout, proc.stderr
+    other = pg_server("cli_other")
+    proc = run("import", out, "--store", other)
+    assert proc.returncode == 0 and "1 labels added or updated, 1 new edges" in proc.stdout
+    line = one_line_error(run("export", "--store", url, "--workspace", tmp_path, "--out", out), 1)
+    assert "exclude each other" in line
+    line = one_line_error(run("export", "--out", out), 1)
+    assert "give --workspace DIR or --store URL" in line
+    line = one_line_error(run("export", "--store", "mysql://x@y/z", "--out", out), 1)
+    assert "not a postgresql://" in line
+    line = one_line_error(run("export", "--store", "postgresql://x@127.0.0.1:1/z", "--out", out), 1)
+    assert "cannot reach the label store" in line

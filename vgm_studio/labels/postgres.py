@@ -383,14 +383,19 @@ class PgLabelStore(LabelStore):
         with self._db.transaction() as db:
             db.execute("DELETE FROM claims WHERE holder = ?", (holder,))
 
-    def trainer_lock(self) -> None:
+    def trainer_lock(self, wait_seconds: float = 3.0) -> None:
         """Makes this process the store's one trainer until it exits.
 
         Raises:
             InputError: Another trainer holds the store.
         """
-        if not self._pg.try_lock(_TRAINER_LOCK):
-            raise InputError(self.url, "another trainer is running on this label store")
+        # The server frees a dead trainer's lock when it notices the disconnect, a moment
+        # after the process died: a restarted trainer waits that moment out.
+        deadline = time.monotonic() + wait_seconds
+        while not self._pg.try_lock(_TRAINER_LOCK):
+            if time.monotonic() > deadline:
+                raise InputError(self.url, "another trainer is running on this label store")
+            time.sleep(0.1)
 
 
 def _implements(store: PgLabelStore) -> LabelStore:
