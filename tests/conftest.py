@@ -57,66 +57,30 @@ def office_edges(tmp_path_factory) -> Path:
     return path
 
 
-def _pg_bin() -> Path | None:
-    found = sorted(Path("/usr/lib/postgresql").glob("*/bin/pg_ctl"))
-    return found[-1].parent if found else None
-
-
-def _as_postgres(command: str) -> None:
-    import subprocess
-
-    prefix = [] if os.geteuid() != 0 else ["su", "postgres", "-s", "/bin/sh", "-c"]
-    args = [*prefix, command] if prefix else ["/bin/sh", "-c", command]
-    subprocess.run(args, check=True, capture_output=True, timeout=120)
-
-
 @pytest.fixture(scope="session")
 def pg_server():
     """A real PostgreSQL server from Debian's binaries on a free loopback port, for the session.
 
-    Yields a callable ``(name) -> URL`` that makes a fresh database; the server is stopped and
-    its folder removed at the end. Skipped without the binaries, but required when CI=true.
+    Yields a callable ``(name) -> URL`` that makes a fresh database (``.restart()`` restarts the
+    server); the server is stopped and its folder removed at the end. Skipped without the
+    binaries, but required when CI=true.
     """
-    import shutil
-    import socket
-    import subprocess
+    from benchmarks.pg_local import LocalPostgres, pg_bin
 
-    bindir = _pg_bin()
+    bindir = pg_bin()
     if bindir is None:
         reason = "PostgreSQL binaries not found (/usr/lib/postgresql/*/bin; apt install postgresql)"
         if os.environ.get("CI", "").lower() == "true":
             pytest.fail(f"CI=true but {reason}")
         pytest.skip(reason)
-    import tempfile
-
-    # Not under pytest's tmp folder: that is private to root, and postgres must reach its own.
-    folder = Path(tempfile.mkdtemp(prefix="vgm-pg-"))
-    data = folder / "data"
-    user = "postgres" if os.geteuid() == 0 else os.environ.get("USER", "postgres")
-    if os.geteuid() == 0:
-        shutil.chown(folder, "postgres")
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    _as_postgres(f"{bindir}/initdb -D {data} -U {user} -A trust --no-sync >/dev/null")
-    opts = f"-p {port} -k {folder} -c listen_addresses=127.0.0.1 -c fsync=on"
-    ctl = f"{bindir}/pg_ctl -D {data} -l {folder}/log -w"
-    _as_postgres(f"{ctl} -o '{opts}' start >/dev/null")
-    base = f"postgresql://{user}@127.0.0.1:{port}"
-    made = iter(range(1_000_000))
+    server = LocalPostgres(bindir)
+    server.start()
 
     def new_database(name: str = "t") -> str:
-        db = f"{name}_{next(made)}"
-        subprocess.run(
-            [str(bindir / "createdb"), "-h", "127.0.0.1", "-p", str(port), "-U", user, db],
-            check=True,
-            capture_output=True,
-        )
-        return f"{base}/{db}"
+        return server.new_database(name)
 
-    new_database.restart = lambda: _as_postgres(f"{ctl} -o '{opts}' -m fast restart >/dev/null")  # type: ignore[attr-defined]
+    new_database.restart = server.restart  # type: ignore[attr-defined]
     try:
         yield new_database
     finally:
-        _as_postgres(f"{ctl} -m immediate stop >/dev/null")
-        shutil.rmtree(folder, ignore_errors=True)
+        server.stop()

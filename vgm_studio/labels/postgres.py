@@ -167,8 +167,11 @@ class _Connection:
 
 
 class PgDatabase:
-    """One connection to the team database, shared by threads under a lock; the SQLite
-    ``Database``'s interface.
+    """Connections to the team database, one per thread; the SQLite ``Database``'s interface.
+
+    One per thread, not one shared under a lock as with SQLite: a label press then never
+    queues behind another annotator's network round trips in the same server, and the
+    server-side lock still serialises the writes.
 
     Args:
         url: ``postgresql://USER@HOST[:PORT]/DB``.
@@ -183,10 +186,33 @@ class PgDatabase:
         self.path = Path(url.split("@")[-1])  # for messages; never opened
         self.retry_seconds = retry_seconds
         self.reconnects = 0
-        self._lock = threading.RLock()
-        self._depth = 0
+        self._local = threading.local()
+        self._opened: list[psycopg.Connection[Any]] = []
+        self._opened_lock = threading.Lock()
         self._conn = self._connect()
         self._prepare()
+
+    @property
+    def _conn(self) -> psycopg.Connection[Any]:
+        conn: psycopg.Connection[Any] | None = getattr(self._local, "conn", None)
+        if conn is None:
+            conn = self._connect()
+            self._conn = conn
+        return conn
+
+    @_conn.setter
+    def _conn(self, conn: psycopg.Connection[Any]) -> None:
+        self._local.conn = conn
+        with self._opened_lock:
+            self._opened.append(conn)
+
+    @property
+    def _depth(self) -> int:
+        return int(getattr(self._local, "depth", 0))
+
+    @_depth.setter
+    def _depth(self, depth: int) -> None:
+        self._local.depth = depth
 
     def _connect(self) -> psycopg.Connection[Any]:
         try:
@@ -230,8 +256,10 @@ class PgDatabase:
         """Made with the store: nothing to do."""
 
     def close(self) -> None:
-        with self._lock:
-            self._conn.close()
+        with self._opened_lock:
+            for conn in self._opened:
+                conn.close()
+            self._opened.clear()
 
     def transaction(self) -> AbstractContextManager[_Connection]:
         """One committed transaction, writers serialised across servers; rolled back whole
@@ -244,25 +272,25 @@ class PgDatabase:
 
     @contextmanager
     def _begin(self, begin: str, lock: bool) -> Iterator[_Connection]:
-        with self._lock:
-            if self._depth:  # nested: part of the caller's transaction
-                yield _Connection(self._conn)
-                return
-            self._reconnect_if_lost()
-            self._conn.execute(begin)
-            if lock:
-                self._conn.execute("SELECT pg_advisory_xact_lock(%s, %s)", _WRITE_LOCK)
-            self._depth += 1
-            try:
-                yield _Connection(self._conn)
-            except BaseException:
-                if not self._conn.broken:
-                    self._conn.execute("ROLLBACK")
-                raise
-            else:
-                self._conn.execute("COMMIT")
-            finally:
-                self._depth -= 1
+        if self._depth:  # nested: part of the caller's transaction
+            yield _Connection(self._conn)
+            return
+        self._reconnect_if_lost()
+        # One round trip: BEGIN and the lock go together (no parameters, so both are sent as
+        # one simple query).
+        lock_sql = "; SELECT pg_advisory_xact_lock({}, {})".format(*_WRITE_LOCK)
+        self._conn.execute(begin + (lock_sql if lock else ""))
+        self._depth += 1
+        try:
+            yield _Connection(self._conn)
+        except BaseException:
+            if not self._conn.broken:
+                self._conn.execute("ROLLBACK")
+            raise
+        else:
+            self._conn.execute("COMMIT")
+        finally:
+            self._depth -= 1
 
     def _reconnect_if_lost(self) -> None:
         if not (self._conn.closed or self._conn.broken):
@@ -271,7 +299,8 @@ class PgDatabase:
         while True:
             try:
                 self._conn = psycopg.connect(self.url, autocommit=True, connect_timeout=5)
-                self.reconnects += 1
+                with self._opened_lock:
+                    self.reconnects += 1
                 return
             except psycopg.OperationalError:
                 if time.monotonic() > deadline:
@@ -284,11 +313,9 @@ class PgDatabase:
         return self.retrying(lambda: self._query(sql, args))
 
     def _query(self, sql: str, args: Iterable[Any]) -> list[Any]:
-        with self._lock:
-            if self._depth:
-                return _Connection(self._conn).execute(sql, tuple(args)).fetchall()
+        if not self._depth:
             self._reconnect_if_lost()
-            return _Connection(self._conn).execute(sql, tuple(args)).fetchall()
+        return _Connection(self._conn).execute(sql, tuple(args)).fetchall()
 
     def retrying(self, call: Callable[[], T]) -> T:
         """``call()``, made again while the server is away (a restart), up to ``retry_seconds``.
@@ -306,10 +333,9 @@ class PgDatabase:
                 time.sleep(0.2)
 
     def try_lock(self, key: tuple[int, int]) -> bool:
-        """Takes a session advisory lock, held until this connection closes."""
-        with self._lock:
-            row = self._conn.execute("SELECT pg_try_advisory_lock(%s, %s)", key).fetchone()
-            return bool(row and row[0])
+        """Takes a session advisory lock, held until this thread's connection closes."""
+        row = self._conn.execute("SELECT pg_try_advisory_lock(%s, %s)", key).fetchone()
+        return bool(row and row[0])
 
 
 def _first_line(exc: Exception) -> str:
@@ -361,13 +387,31 @@ class PgLabelStore(LabelStore):
     def import_label(self, record: LabelRecord) -> bool:
         return self._pg.retrying(lambda: LabelStore.import_label(self, record))
 
-    def claim(self, edge_id: str, holder: str, seconds: float = 300.0) -> bool:
+    def claim(
+        self, edge_id: str, holder: str, seconds: float = 300.0, unlabelled: bool = True
+    ) -> bool:
         """Takes ``edge_id`` for ``holder`` for ``seconds``, unless someone else holds it.
+
+        Args:
+            edge_id: The edge to hand to ``holder``.
+            holder: Who takes it (an annotator's name, or a tab's id).
+            seconds: How long the claim lasts unless released or renewed.
+            unlabelled: Refuse an edge someone labelled already (the unlabelled queue).
 
         Returns:
             Whether ``holder`` now holds it.
         """
+        return self._pg.retrying(lambda: self._claim(edge_id, holder, seconds, unlabelled))
+
+    def _claim(self, edge_id: str, holder: str, seconds: float, unlabelled: bool) -> bool:
         with self._db.transaction() as db:
+            if (
+                unlabelled
+                and db.execute(
+                    "SELECT 1 FROM labels WHERE edge_id = ? LIMIT 1", (edge_id,)
+                ).fetchone()
+            ):
+                return False
             row = db.execute("SELECT holder, until FROM claims WHERE edge_id = ?", (edge_id,))
             held = row.fetchone()
             if held is not None and held[0] != holder and held[1] > time.time():
@@ -380,8 +424,12 @@ class PgLabelStore(LabelStore):
 
     def release(self, holder: str) -> None:
         """Gives back every edge ``holder`` holds."""
-        with self._db.transaction() as db:
-            db.execute("DELETE FROM claims WHERE holder = ?", (holder,))
+
+        def release() -> None:
+            with self._db.transaction() as db:
+                db.execute("DELETE FROM claims WHERE holder = ?", (holder,))
+
+        self._pg.retrying(release)
 
     def trainer_lock(self, wait_seconds: float = 3.0) -> None:
         """Makes this process the store's one trainer until it exits.
