@@ -67,12 +67,15 @@ def test_labels_acknowledged_before_a_restart_survive_and_a_press_during_it_is_r
     pg_server, url, tmp_path
 ):
     store = PgLabelStore(url, models_dir=tmp_path)
+    said: list[str | None] = []
+    store.on_connection(said.append)  # what the studio shows in its panel
     ids = store.edge_ids()
     for edge_id in ids[:20]:
         store.label(edge_id, "ana", "failure")
     pg_server.restart()
     store.label(ids[20], "ana", "success")  # the connection died; made again, press retried
     assert store.reconnects == 1
+    assert len(said) == 2 and "label store unreachable" in str(said[0]) and said[1] is None
     fresh = PgLabelStore(url, models_dir=tmp_path)
     assert len(fresh.labels()) == 21
     fresh.close()

@@ -186,6 +186,8 @@ class PgDatabase:
         self.path = Path(url.split("@")[-1])  # for messages; never opened
         self.retry_seconds = retry_seconds
         self.reconnects = 0
+        # Told a line while the server is away and None once it is back (the studio's panel).
+        self.report: Callable[[str | None], None] = lambda _line: None
         self._local = threading.local()
         self._opened: list[psycopg.Connection[Any]] = []
         self._opened_lock = threading.Lock()
@@ -324,13 +326,21 @@ class PgDatabase:
         the server refused is raised at once.
         """
         deadline = time.monotonic() + self.retry_seconds
+        waited = False
         while True:
             try:
-                return call()
-            except psycopg.OperationalError:
+                result = call()
+            except psycopg.OperationalError as exc:
                 if self._depth or time.monotonic() > deadline:
                     raise
+                if not waited:
+                    self.report(f"label store unreachable ({_first_line(exc)}); retrying")
+                    waited = True
                 time.sleep(0.2)
+            else:
+                if waited:
+                    self.report(None)
+                return result
 
     def try_lock(self, key: tuple[int, int]) -> bool:
         """Takes a session advisory lock, held until this thread's connection closes."""
@@ -430,6 +440,10 @@ class PgLabelStore(LabelStore):
                 db.execute("DELETE FROM claims WHERE holder = ?", (holder,))
 
         self._pg.retrying(release)
+
+    def on_connection(self, report: Callable[[str | None], None]) -> None:
+        """Calls ``report(line)`` when the server is lost mid-press, ``report(None)`` when back."""
+        self._pg.report = report
 
     def trainer_lock(self, wait_seconds: float = 3.0) -> None:
         """Makes this process the store's one trainer until it exits.

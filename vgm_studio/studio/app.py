@@ -8,6 +8,7 @@ claimed and not handed to another.
 from __future__ import annotations
 
 import getpass
+import os
 import socket
 import threading
 from collections.abc import Callable
@@ -19,6 +20,7 @@ import numpy as np
 import viser
 
 from vgm_studio.errors import InputError
+from vgm_studio.labels.repository import SharedStore
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
@@ -135,6 +137,12 @@ class Studio:
         # "Train now" in the panel; None when no trainer runs beside the studio.
         self._train_now_callback = train_now
         self._trainer_text = ""
+        self._store_text: str | None = None
+        # A team store: claims hold across servers, and a lost connection is said in the panel.
+        self._shared = store if isinstance(store, SharedStore) else None
+        self._holder = f"{socket.gethostname()}:{os.getpid()}:"
+        if self._shared is not None:
+            self._shared.on_connection(self.show_store_status)
 
     @property
     def url(self) -> str:
@@ -193,8 +201,23 @@ class Studio:
         if text == self._trainer_text:
             return
         self._trainer_text = text
+        if self._store_text:  # a lost label store is the more urgent line
+            return
         for tab in list(self._tabs.values()):
             tab.panel.trainer.content = text
+
+    def show_store_status(self, line: str | None) -> None:
+        """Says in every tab that the label store is unreachable (None: it is back)."""
+        self._store_text = line
+        text = f"**{line}**; labels already acknowledged are stored" if line else None
+        for tab in list(self._tabs.values()):
+            tab.panel.trainer.content = text or self._trainer_text
+
+    def _held_in_store(self, edge_id: str, tab: _Tab) -> bool:
+        """Claims ``edge_id`` for the tab in a shared store (always true for a workspace's)."""
+        if self._shared is None:
+            return True
+        return self._shared.claim(edge_id, self._holder + str(tab.client.client_id))
 
     def _train_now(self, tab: _Tab) -> None:
         if self._train_now_callback is None:
@@ -243,6 +266,8 @@ class Studio:
             self._tabs.pop(client.client_id, None)
             for edge_id in [e for e, c in self._claims.items() if c == client.client_id]:
                 del self._claims[edge_id]
+        if self._shared is not None:
+            self._shared.release(self._holder + str(client.client_id))
 
     def _edge(self, edge_id: str) -> Edge:
         edge = self._edges.get(edge_id)
@@ -325,10 +350,13 @@ class Studio:
                 n = len(tab.order)
                 start = tab.index + 1
                 candidates = [(start + k) % n for k in range(n)] if n else []
+                if self._shared is not None:
+                    self._shared.release(self._holder + str(tab.client.client_id))
                 for i in candidates:
                     e = tab.order[i]
                     held = self._claims.get(e)
-                    if not labels.get(e) and held in (None, tab.client.client_id):
+                    free = not labels.get(e) and held in (None, tab.client.client_id)
+                    if free and self._held_in_store(e, tab):
                         tab.index = i
                         break
                 else:
