@@ -51,17 +51,28 @@ def _edges(count: int) -> list[Edge]:
     ]
 
 
+def _next_free(store, name: str, queue: list[str], pos: int) -> int | None:
+    """What the studio's move does: read the labels, claim the next unlabelled edge."""
+    labels = store.label_map()
+    store.release(name)
+    for i in range(pos, len(queue)):
+        if queue[i] not in labels and store.claim(queue[i], name):
+            return i
+    return None
+
+
 def _annotate(store, name: str, queue: list[str], team: bool, out: dict) -> None:
     latencies, acked = [], []
-    for edge_id in queue:
-        if team and not store.claim(edge_id, name):
-            continue
+    pos: int | None = 0
+    while True:
+        pos = _next_free(store, name, queue, pos or 0) if team else pos
+        if pos is None or pos >= len(queue):
+            break
         start = time.perf_counter()
-        store.label(edge_id, name, "success")
+        store.label(queue[pos], name, "success")
         latencies.append(time.perf_counter() - start)
-        acked.append(edge_id)
-        if team:
-            store.release(name)
+        acked.append(queue[pos])
+        pos += 1
     out[name] = (latencies, acked)
 
 

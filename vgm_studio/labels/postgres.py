@@ -14,9 +14,12 @@ The guarantees are the SQLite store's:
   server's default, on), appended to ``events``; ``labels`` is derived in the same one.
 * Writers are serialised per store by a transaction-scoped advisory lock, just as SQLite's
   ``BEGIN IMMEDIATE`` serialises them, so ``MAX(position) + 1`` and ``MAX(version) + 1`` stay
-  race-free across servers; reads are ``REPEATABLE READ READ ONLY`` snapshots, never blocked.
+  race-free across servers; a label press (label, skip, import of one label) takes that lock
+  shared and its edge's lock alone, so presses on different edges run side by side. Reads
+  are ``REPEATABLE READ READ ONLY`` snapshots, never blocked.
 * Claims: ``claim`` takes an edge for one annotator for a while (a row with an expiry, taken
-  under the same lock), so no two annotators on any server are handed the same edge.
+  in one ``INSERT … ON CONFLICT`` statement), so no two annotators on any server are handed
+  the same edge.
 * One trainer per store: ``trainer_lock`` holds a session advisory lock, freed when the
   trainer's connection dies.
 * The ``meta`` table carries the format and schema marks; another schema is refused in one line.
@@ -38,6 +41,7 @@ from pathlib import Path
 from typing import Any, TypeVar, cast
 
 import psycopg
+import psycopg.sql
 
 from vgm_studio import __version__
 from vgm_studio.errors import InputError
@@ -50,6 +54,7 @@ from vgm_studio.labels.versions import ModelVersions
 # Advisory lock keys (any two 32-bit numbers that are ours): writers, and the one trainer.
 _WRITE_LOCK = (0x56474D, 1)
 _TRAINER_LOCK = (0x56474D, 2)
+_EDGE_LOCKS = 0x56474E  # with hashtext(edge_id): one edge's label presses
 
 TABLES = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -280,8 +285,7 @@ class PgDatabase:
         self._reconnect_if_lost()
         # One round trip: BEGIN and the lock go together (no parameters, so both are sent as
         # one simple query).
-        lock_sql = "; SELECT pg_advisory_xact_lock({}, {})".format(*_WRITE_LOCK)
-        self._conn.execute(begin + (lock_sql if lock else ""))
+        self._conn.execute(begin + (self._lock_sql() if lock else ""))
         self._depth += 1
         try:
             yield _Connection(self._conn)
@@ -293,6 +297,27 @@ class PgDatabase:
             self._conn.execute("COMMIT")
         finally:
             self._depth -= 1
+
+    def _lock_sql(self) -> str:
+        """The writer's lock: the whole store, or (a label press) the store shared and one
+        edge alone, so presses on different edges do not queue behind each other."""
+        edge: str | None = getattr(self._local, "edge", None)
+        if edge is None:
+            return "; SELECT pg_advisory_xact_lock({}, {})".format(*_WRITE_LOCK)
+        literal = psycopg.sql.Literal(edge).as_string(self._conn)
+        return (
+            "; SELECT pg_advisory_xact_lock_shared({}, {}), ".format(*_WRITE_LOCK)
+            + f"pg_advisory_xact_lock({_EDGE_LOCKS}, hashtext({literal}))"
+        )
+
+    @contextmanager
+    def for_edge(self, edge_id: str) -> Iterator[None]:
+        """Within it, this thread's writes touch ``edge_id``'s labels and events only."""
+        self._local.edge = edge_id
+        try:
+            yield
+        finally:
+            self._local.edge = None
 
     def _reconnect_if_lost(self) -> None:
         if not (self._conn.closed or self._conn.broken):
@@ -386,16 +411,21 @@ class PgLabelStore(LabelStore):
         return self._pg.reconnects
 
     def label(self, edge_id: str, annotator: str, label: str, note: str = "") -> Event:
-        return self._pg.retrying(lambda: LabelStore.label(self, edge_id, annotator, label, note))
+        with self._pg.for_edge(edge_id):
+            return self._pg.retrying(
+                lambda: LabelStore.label(self, edge_id, annotator, label, note)
+            )
 
     def skip(self, edge_id: str, annotator: str) -> Event:
-        return self._pg.retrying(lambda: LabelStore.skip(self, edge_id, annotator))
+        with self._pg.for_edge(edge_id):
+            return self._pg.retrying(lambda: LabelStore.skip(self, edge_id, annotator))
 
     def undo(self, event_id: int) -> Event:
         return self._pg.retrying(lambda: LabelStore.undo(self, event_id))
 
     def import_label(self, record: LabelRecord) -> bool:
-        return self._pg.retrying(lambda: LabelStore.import_label(self, record))
+        with self._pg.for_edge(record.edge_id):
+            return self._pg.retrying(lambda: LabelStore.import_label(self, record))
 
     def claim(
         self, edge_id: str, holder: str, seconds: float = 300.0, unlabelled: bool = True
@@ -414,32 +444,32 @@ class PgLabelStore(LabelStore):
         return self._pg.retrying(lambda: self._claim(edge_id, holder, seconds, unlabelled))
 
     def _claim(self, edge_id: str, holder: str, seconds: float, unlabelled: bool) -> bool:
-        with self._db.transaction() as db:
-            if (
-                unlabelled
-                and db.execute(
-                    "SELECT 1 FROM labels WHERE edge_id = ? LIMIT 1", (edge_id,)
-                ).fetchone()
-            ):
-                return False
-            row = db.execute("SELECT holder, until FROM claims WHERE edge_id = ?", (edge_id,))
-            held = row.fetchone()
-            if held is not None and held[0] != holder and held[1] > time.time():
-                return False
-            db.execute("DELETE FROM claims WHERE edge_id = ?", (edge_id,))
-            db.execute(
-                "INSERT INTO claims VALUES (?, ?, ?)", (edge_id, holder, time.time() + seconds)
+        # One statement, no store-wide lock: the row lock of ON CONFLICT decides between two
+        # servers claiming at once, and moving on costs a label press nothing.
+        rows = self._db.query(
+            "INSERT INTO claims AS c (edge_id, holder, until) "
+            "SELECT ?, ?, ? WHERE NOT (? AND EXISTS (SELECT 1 FROM labels WHERE edge_id = ?)) "
+            "ON CONFLICT (edge_id) DO UPDATE SET holder = EXCLUDED.holder, until = EXCLUDED.until "
+            "WHERE c.holder = EXCLUDED.holder OR c.until < ? RETURNING holder",
+            (edge_id, holder, time.time() + seconds, unlabelled, edge_id, time.time()),
+        )
+        if (
+            rows
+            and unlabelled
+            and self._db.query("SELECT 1 FROM labels WHERE edge_id = ? LIMIT 1", (edge_id,))
+        ):
+            # Labelled by the holder we displaced as it moved on: the check above read a
+            # snapshot from before that label; this statement's snapshot is newer.
+            self._db.query(
+                "DELETE FROM claims WHERE edge_id = ? AND holder = ? RETURNING edge_id",
+                (edge_id, holder),
             )
-        return True
+            return False
+        return bool(rows)
 
     def release(self, holder: str) -> None:
         """Gives back every edge ``holder`` holds."""
-
-        def release() -> None:
-            with self._db.transaction() as db:
-                db.execute("DELETE FROM claims WHERE holder = ?", (holder,))
-
-        self._pg.retrying(release)
+        self._db.query("DELETE FROM claims WHERE holder = ? RETURNING edge_id", (holder,))
 
     def on_connection(self, report: Callable[[str | None], None]) -> None:
         """Calls ``report(line)`` when the server is lost mid-press, ``report(None)`` when back."""
