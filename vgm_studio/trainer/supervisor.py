@@ -141,6 +141,8 @@ class TrainerSupervisor:
     def _run_once(self) -> int | None:
         """Runs the trainer until it exits; returns its exit code (None: it never started)."""
         try:
+            # A team store's models folder may not exist before its first version.
+            self.log_path.parent.mkdir(parents=True, exist_ok=True)
             with self.log_path.open("ab") as log:
                 proc = subprocess.Popen(
                     self.command, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
