@@ -84,3 +84,26 @@ def pg_server():
         yield new_database
     finally:
         server.stop()
+
+
+@pytest.fixture(scope="session")
+def balanced_office_edges(office_edges) -> Path:
+    """The office edges' successes, each sequential one also moved by 0.6 m / 9° as a failure
+    (at most 80): the office log's matches nearly all succeed, and a trainer needs both
+    classes to learn from. Written beside the office edges; the scans are the same log's."""
+    from dataclasses import replace
+
+    from vgm_studio.matching.edges import edge_id, read_edges, write_edges
+
+    out = []
+    for e in read_edges(office_edges):
+        if e.label != "success":
+            continue
+        out.append(e)
+        if e.kind == "sequential" and len(out) < 160:
+            est = [e.estimate[0] + 0.6, e.estimate[1] - 0.4, e.estimate[2] + 0.15]
+            moved = edge_id(e.log_sha256, e.a, e.b, est)
+            out.append(replace(e, edge_id=moved, estimate=est, label="failure"))
+    path = office_edges.parent / "balanced.jsonl"
+    write_edges(path, out)
+    return path

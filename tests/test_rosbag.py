@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import io
 import math
+import re
 import shutil
 import sys
 from collections.abc import Callable, Sequence
@@ -365,7 +366,7 @@ def test_two_scan_topics_need_a_choice(tmp_path: Path, kind: str) -> None:
         read_rosbag(path)
     message = str(err.value)
     assert message.startswith(f"{path}: ")
-    assert "/scan_front" in message and "/scan_rear" in message and "scan_topic" in message
+    assert "/scan_front" in message and "/scan_rear" in message and "--scan-topic" in message
 
     rear = read_rosbag(path, ReadOptions(scan_topic="/scan_rear"))
     assert len(rear) == 7
@@ -386,12 +387,12 @@ def test_two_odometry_topics_need_a_choice(tmp_path: Path) -> None:
         "rosbag1",
         lambda ts: scan_messages(ts) + odom_messages(ts) + odom_messages(ts, "/odom_b", offset=10),
     )
-    with pytest.raises(InputError, match=r"/odom, /odom_b.*odom_topic"):
+    with pytest.raises(InputError, match=r"/odom, /odom_b.*--odom-topic"):
         read_rosbag(path)
     log = read_rosbag(path, ReadOptions(odom_topic="/odom_b"))
     for k, scan in enumerate(log.scans):
         assert_pose_close(scan.odometry, true_pose((scan_stamp_ns(k) - T0_NS) / NS, offset=10))
-    with pytest.raises(InputError, match="odom_topic /scan carries sensor_msgs/msg/LaserScan"):
+    with pytest.raises(InputError, match="--odom-topic /scan carries sensor_msgs/msg/LaserScan"):
         read_rosbag(path, ReadOptions(odom_topic="/scan"))
 
 
@@ -526,3 +527,60 @@ def test_progress_bar_on_a_terminal_only(
         assert f"{total}/{total}" in stderr.getvalue() and path.name in stderr.getvalue()
     else:
         assert stderr.getvalue() == ""
+
+
+def _index_pos_at(data: bytes) -> tuple[int, int]:
+    """(offset of the header's index_pos value, index_pos) of a ROS 1 (2.0) bag."""
+    at = data.index(b"index_pos=") + len(b"index_pos=")
+    return at, int.from_bytes(data[at : at + 8], "little")
+
+
+def old_format_bag(tmp_path: Path) -> Path:
+    data = write_bag(tmp_path, "rosbag1", standard, name="whole").read_bytes()
+    path = tmp_path / "old.bag"
+    path.write_bytes(b"#ROSRECORD V1.2\n" + data[len(b"#ROSBAG V2.0\n") :])
+    return path
+
+
+def unindexed_bag(tmp_path: Path) -> Path:
+    """A recording cut short: the header's index_pos was never written (still 0)."""
+    data = bytearray(write_bag(tmp_path, "rosbag1", standard, name="whole").read_bytes())
+    at, _ = _index_pos_at(bytes(data))
+    data[at : at + 8] = bytes(8)
+    path = tmp_path / "unindexed.bag"
+    path.write_bytes(bytes(data))
+    return path
+
+
+def damaged_index_bag(tmp_path: Path) -> Path:
+    """The whole file is there, but its index records are overwritten."""
+    data = bytearray(write_bag(tmp_path, "rosbag1", standard, name="whole").read_bytes())
+    _, index_pos = _index_pos_at(bytes(data))
+    data[index_pos + 4 : index_pos + 60] = b"\xff" * 56
+    path = tmp_path / "damaged.bag"
+    path.write_bytes(bytes(data))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("make", "reason", "remedy"),
+    [
+        (old_format_bag, "ROSRECORD V1.2 is older than 2.0", "`rosbag fix old.bag NEW.bag`"),
+        (truncated_bag, r"the file is truncated \(", "`rosbag reindex truncated.bag`"),
+        (unindexed_bag, "the bag has no index", "`rosbag reindex unindexed.bag`"),
+        (damaged_index_bag, "rosbags rejects its index", "`rosbags-convert --src damaged.bag"),
+        (empty_bag, "an empty file", ""),
+    ],
+    ids=["format-1.2", "truncated", "unindexed", "damaged-index", "empty"],
+)
+def test_unreadable_ros1_bag_says_why_and_what_to_do(
+    tmp_path: Path, make: Callable[[Path], Path], reason: str, remedy: str
+) -> None:
+    path = make(tmp_path)
+    with pytest.raises(InputError) as err:
+        read_rosbag(path)
+    message = str(err.value)
+    assert message.startswith(f"{path}: not a readable ROS bag: ")
+    assert "\n" not in message
+    assert re.search(reason, message), message
+    assert remedy in message

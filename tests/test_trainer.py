@@ -1,8 +1,7 @@
 """The background trainer: versions, promotion, predictions, a killed trainer, export.
 
 Real SQLite, real torch training (small epochs) on a simulated office workspace whose labels
-are the edges' reference labels. The office log's matches nearly all succeed, so each
-sequential edge also appears moved by 0.6 m / 9° as a failure: a balanced set to learn from.
+are the edges' reference labels (``balanced_office_edges``: a balanced set to learn from).
 """
 
 from __future__ import annotations
@@ -23,7 +22,7 @@ from vgm_studio.errors import InputError
 from vgm_studio.labels import versions
 from vgm_studio.labels.records import NewVersion
 from vgm_studio.labels.store import LabelStore
-from vgm_studio.matching.edges import Edge, edge_id, read_edges
+from vgm_studio.matching.edges import Edge, read_edges
 from vgm_studio.model import Validator
 from vgm_studio.tools import trainer_cmds
 from vgm_studio.trainer import PromotionWatcher, registry
@@ -38,19 +37,6 @@ from vgm_studio.trainer.worker import Job, TrainerConfig, Worker
 FAST = FitConfig(epochs=6, epoch_size=256, batch_size=16, lr=1e-2, hyper={"figures": True})
 # These workspaces hold out ~16 edges of a class; the default minimum (20) has its own test.
 SMALL = PromotionRule(min_per_class=5)
-
-
-def _balanced(path: Path, failures: int = 80) -> list[Edge]:
-    out = []
-    for e in read_edges(path):
-        if e.label != "success":
-            continue
-        out.append(e)
-        if e.kind == "sequential" and len(out) < 2 * failures:
-            est = [e.estimate[0] + 0.6, e.estimate[1] - 0.4, e.estimate[2] + 0.15]
-            moved = edge_id(e.log_sha256, e.a, e.b, est)
-            out.append(replace(e, edge_id=moved, estimate=est, label="failure"))
-    return out
 
 
 def _workspace(folder: Path, edges: list[Edge], labelled: int | None = None) -> LabelStore:
@@ -71,8 +57,8 @@ def _keep_torch_threads():
 
 
 @pytest.fixture(scope="module")
-def edges(office_edges) -> list[Edge]:
-    return _balanced(office_edges)
+def edges(balanced_office_edges) -> list[Edge]:
+    return read_edges(balanced_office_edges)
 
 
 @pytest.fixture(scope="module")

@@ -69,6 +69,9 @@ def fill_workspace(
     if not source.exists():
         raise InputError(source, "no such file or folder")
     key = source_key(source, reference)
+    if options.laser_pose is not None or options.laser_flipped:
+        # Another mount places the scans elsewhere: other edges, not the ones already there.
+        key += f":{options.laser_pose}:{options.laser_flipped}"
     if store.has_source(key):
         return 0
     if source.suffix.lower() == ".jsonl":

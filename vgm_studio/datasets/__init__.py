@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from vgm_studio.datasets.carmen import read_carmen
+from vgm_studio.datasets.mount import mount_from_options, with_mount
 from vgm_studio.datasets.options import ReadOptions
 from vgm_studio.datasets.scans import Scan, ScanLog
 from vgm_studio.errors import InputError
@@ -13,7 +14,12 @@ __all__ = ["ReadOptions", "Scan", "ScanLog", "open_log"]
 
 
 def open_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
-    """Reads a CARMEN log (a file) or a ROS bag (a ``.bag`` file or a ROS 2 bag folder)."""
+    """Reads a CARMEN log (a file) or a ROS bag (a ``.bag`` file or a ROS 2 bag folder).
+
+    The laser's mount in ``options`` places the scans in the base frame. A CARMEN log's pose
+    fields are the laser's pose (ROBOTLASER1 says so; CARMEN writes FLASER's the same way), so
+    they move to the base with the mount and the world stays where the log put it.
+    """
     path = Path(path)
     if not path.exists():
         raise InputError(path, "no such file or folder")
@@ -21,4 +27,8 @@ def open_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
         from vgm_studio.datasets.rosbag import read_rosbag
 
         return read_rosbag(path, options)
-    return read_carmen(path, options)
+    log = read_carmen(path, options)
+    if options is None:
+        return log
+    mount = mount_from_options(options.laser_pose, options.laser_flipped)
+    return with_mount(log, mount, "given by --laser-pose/--laser-flipped", poses_of_laser=True)

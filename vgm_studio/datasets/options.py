@@ -24,6 +24,9 @@ class ReadOptions:
         skip_bad_lines: Read on past malformed lines and count them instead of stopping.
         scan_topic: ROS bags: the LaserScan topic (``None``: the only one in the bag).
         odom_topic: ROS bags: the Odometry topic (``None``: the only one, if any).
+        laser_pose: The laser in the robot's base frame as (x m, y m, yaw degrees); with
+            ``laser_flipped`` it overrides what a bag's tf says. ``None``: from tf, else the base.
+        laser_flipped: The laser is mounted upside down (its scans are mirrored).
     """
 
     poses: Literal["auto", "odometry", "reference"] = "auto"
@@ -33,3 +36,5 @@ class ReadOptions:
     skip_bad_lines: bool = False
     scan_topic: str | None = None
     odom_topic: str | None = None
+    laser_pose: tuple[float, float, float] | None = None
+    laser_flipped: bool = False

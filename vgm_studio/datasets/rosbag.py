@@ -17,9 +17,12 @@ zero (drivers that never fill it in).
 Poses: a scan's odometry is the Odometry pose ``(x, y, yaw)`` interpolated at the scan's time,
 linearly in x, y and the unwrapped yaw. A scan before the first or after the last Odometry
 message takes the nearest one if it is at most ``MAX_ODOMETRY_EXTRAPOLATION`` seconds away, and
-no odometry otherwise. The Odometry pose is of the robot base (its ``child_frame_id``); **we
-assume the laser is mounted at the base** and read no TF, so a laser mounted away from the base
-gives scans whose odometry is off by that fixed mounting offset.
+no odometry otherwise. The Odometry pose is of the robot base (its ``child_frame_id``).
+
+The laser's mount: ``ReadOptions.laser_pose``/``laser_flipped`` when given; else the chain of
+``/tf_static`` and ``/tf`` from the LaserScan's ``frame_id`` to the Odometry's
+``child_frame_id`` (``datasets/tf.py``); else the laser is taken to be at the base. Scans carry
+the mount, and ``Scan.points`` places their points in the base frame.
 
 Readings: ``ranges`` are kept as the bag has them, NaN and ±inf included; ``Scan.points`` drops
 those, readings below ``MIN_VALID_RANGE`` and readings at or beyond ``max_range``
@@ -28,31 +31,28 @@ those, readings below ``MIN_VALID_RANGE`` and readings at or beyond ``max_range`
 
 from __future__ import annotations
 
-import importlib
 import math
-import sqlite3
-import struct
 import sys
 from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import suppress
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
-from rosbags.highlevel import AnyReader, AnyReaderError
-from rosbags.rosbag1 import ReaderError as Rosbag1Error
-from rosbags.rosbag2 import ReaderError as Rosbag2Error
-from rosbags.serde import SerdeError
-from rosbags.typesys import Stores, TypesysError, get_typestore
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
 from tqdm import tqdm
 
 from vgm_studio.core.hashing import content_hash
 from vgm_studio.core.se2 import wrap_angle
+from vgm_studio.datasets.bag_errors import BAG_ERRORS, bag_error, one_line
+from vgm_studio.datasets.mount import LaserMount, mount_from_options
 from vgm_studio.datasets.options import ReadOptions
 from vgm_studio.datasets.scans import Scan, ScanLog
+from vgm_studio.datasets.tf import TF_TYPES, TfTree, mount_from_tf
 from vgm_studio.errors import InputError
 
 if TYPE_CHECKING:
@@ -64,42 +64,6 @@ ROS2_STORAGE_SUFFIXES = frozenset({".db3", ".mcap"})
 
 # Seconds a scan may lie before the first or after the last Odometry message and still take it.
 MAX_ODOMETRY_EXTRAPOLATION = 0.5
-
-
-def _optional_error(module: str, name: str) -> tuple[type[Exception], ...]:
-    """An exception class of a module rosbags may use, or nothing when it is not installed."""
-    try:
-        found = getattr(importlib.import_module(module), name, None)
-    except ImportError:
-        return ()
-    return (found,) if isinstance(found, type) and issubclass(found, Exception) else ()
-
-
-# What ``rosbags`` raises on a bag it cannot read: its own errors, and what its parsers and
-# decompressors let through on a damaged file (short reads, bad headers, a broken sqlite
-# database, bad YAML, bad lz4/bz2/zstd data, a damaged length field asking for terabytes).
-_BAG_ERRORS: tuple[type[Exception], ...] = (
-    AnyReaderError,
-    Rosbag1Error,
-    Rosbag2Error,
-    SerdeError,
-    TypesysError,
-    OSError,
-    EOFError,
-    sqlite3.Error,
-    struct.error,
-    ValueError,
-    KeyError,
-    IndexError,
-    TypeError,
-    AttributeError,
-    AssertionError,
-    RuntimeError,
-    MemoryError,
-    *_optional_error("apsw", "Error"),
-    *_optional_error("backports.zstd", "ZstdError"),
-    *_optional_error("zstandard", "ZstdError"),
-)
 
 
 def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
@@ -137,17 +101,6 @@ class _RawScan:
     angle_min: float
     angle_increment: float
     range_max: float
-
-
-def _one_line(err: BaseException) -> str:
-    if isinstance(err, MemoryError):
-        return "out of memory (a damaged length field?)"
-    text = " ".join(str(err).split())
-    return text or type(err).__name__
-
-
-def _bag_error(path: Path, err: BaseException) -> InputError:
-    return InputError(path, f"not a readable ROS bag: {_one_line(err)}")
 
 
 def _describe_topics(topics: Mapping[str, TopicInfo]) -> str:
@@ -206,15 +159,15 @@ def _messages(
                 connection, receive_ns, data = next(raw_messages)
             except StopIteration:
                 return
-            except _BAG_ERRORS as err:
-                raise _bag_error(path, err) from None
+            except BAG_ERRORS as err:
+                raise bag_error(path, err) from None
             try:
                 msg = reader.deserialize(data, connection.msgtype)
-            except _BAG_ERRORS as err:
+            except BAG_ERRORS as err:
                 raise InputError(
                     path,
                     f"{connection.topic}: cannot decode the {connection.msgtype} message "
-                    f"recorded at {receive_ns / 1e9:.9f} s: {_one_line(err)}",
+                    f"recorded at {receive_ns / 1e9:.9f} s: {one_line(err)}",
                 ) from None
             bar.update()
             yield connection, receive_ns, msg
@@ -225,8 +178,8 @@ def _open_reader(path: Path, is_ros1: bool) -> AnyReader:
     try:
         reader = AnyReader([path], default_typestore=get_typestore(store))
         reader.open()
-    except _BAG_ERRORS as err:
-        raise _bag_error(path, err) from None
+    except BAG_ERRORS as err:
+        raise bag_error(path, err) from None
     return reader
 
 
@@ -247,16 +200,93 @@ def _check_path(path: Path) -> bool:
     )
 
 
+@dataclass
+class _Collected:
+    """What the reader keeps of the messages, in bag order."""
+
+    raw: list[_RawScan] = field(default_factory=list)
+    odom_ns: list[int] = field(default_factory=list)
+    odom_poses: list[tuple[float, float, float]] = field(default_factory=list)
+    counts: Counter[str] = field(default_factory=Counter)
+    laser_frame: str = ""
+    base_frame: str | None = None
+    tf: TfTree = field(default_factory=TfTree)
+
+    def add(self, topic: str, msgtype: str, receive_ns: int, msg: Any, scan_topic: str) -> None:
+        self.counts[topic] += 1
+        if topic == scan_topic:
+            self.laser_frame = self.laser_frame or str(msg.header.frame_id)
+            self.raw.append(
+                _RawScan(
+                    stamp_ns=_stamp_ns(msg, receive_ns),
+                    ranges=np.array(msg.ranges, dtype=np.float32),
+                    angle_min=float(msg.angle_min),
+                    angle_increment=float(msg.angle_increment),
+                    range_max=float(msg.range_max),
+                )
+            )
+        elif msgtype in TF_TYPES:
+            self.tf.add_message(msg, receive_ns, static=topic.endswith("tf_static"))
+        else:
+            q = msg.pose.pose.orientation
+            pose = (
+                float(msg.pose.pose.position.x),
+                float(msg.pose.pose.position.y),
+                yaw_from_quaternion(float(q.x), float(q.y), float(q.z), float(q.w)),
+            )
+            if all(math.isfinite(v) for v in pose):
+                self.base_frame = self.base_frame or str(msg.child_frame_id) or None
+                self.odom_ns.append(_stamp_ns(msg, receive_ns))
+                self.odom_poses.append(pose)
+
+
+def _read_messages(path: Path, reader: AnyReader, options: ReadOptions) -> tuple[_Collected, str]:
+    """Reads the scan, odometry and (without a mount in the options) tf topics."""
+    try:
+        topics = reader.topics
+    except BAG_ERRORS as err:
+        raise bag_error(path, err) from None
+    scan_topic = _choose_topic(
+        path,
+        topics,
+        LASER_SCAN_TYPES,
+        options.scan_topic,
+        what="sensor_msgs/LaserScan",
+        option="--scan-topic",
+        required=True,
+    )
+    assert scan_topic is not None  # required
+    odom_topic = _choose_topic(
+        path,
+        topics,
+        ODOMETRY_TYPES,
+        options.odom_topic,
+        what="nav_msgs/Odometry",
+        option="--odom-topic",
+        required=False,
+    )
+    read = {t for t in (scan_topic, odom_topic) if t is not None}
+    if mount_from_options(options.laser_pose, options.laser_flipped) is None:
+        read |= {name for name, info in topics.items() if info.msgtype in TF_TYPES}
+    connections = [c for c in reader.connections if c.topic in read]
+    total = sum(topics[t].msgcount for t in read)
+    got = _Collected()
+    for connection, receive_ns, msg in _messages(path, reader, connections, total):
+        got.add(connection.topic, connection.msgtype, receive_ns, msg, scan_topic)
+    return got, scan_topic
+
+
 def read_rosbag(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
     """Reads the laser scans, with odometry where the bag has it, from a ROS 1 or ROS 2 bag.
 
     Args:
         path: A ROS 1 ``.bag`` file, a ROS 2 bag folder, or a ROS 2 ``.db3``/``.mcap`` file.
-        options: How to read it; ``scan_topic``, ``odom_topic`` and ``max_range`` apply.
+        options: How to read it; ``scan_topic``, ``odom_topic``, ``max_range``, ``laser_pose``
+            and ``laser_flipped`` apply.
 
     Returns:
-        The scans in the order the bag recorded them. Poses are in ``Scan.odometry``
-        (see the module docstring for how they are timed and framed).
+        The scans in the order the bag recorded them, placed in the base frame by the laser's
+        mount. Poses are in ``Scan.odometry`` (see the module docstring).
 
     Raises:
         InputError: The path is missing or not a bag, the bag cannot be read, the topic to read
@@ -265,67 +295,17 @@ def read_rosbag(path: str | Path, options: ReadOptions | None = None) -> ScanLog
     path = Path(path)
     options = options or ReadOptions()
     is_ros1 = _check_path(path)
-    raw: list[_RawScan] = []
-    odom_ns: list[int] = []
-    odom_poses: list[tuple[float, float, float]] = []
-    counts: Counter[str] = Counter()
     reader = _open_reader(path, is_ros1)
     try:
-        try:
-            topics = reader.topics
-        except _BAG_ERRORS as err:
-            raise _bag_error(path, err) from None
-        scan_topic = _choose_topic(
-            path,
-            topics,
-            LASER_SCAN_TYPES,
-            options.scan_topic,
-            what="sensor_msgs/LaserScan",
-            option="scan_topic",
-            required=True,
-        )
-        odom_topic = _choose_topic(
-            path,
-            topics,
-            ODOMETRY_TYPES,
-            options.odom_topic,
-            what="nav_msgs/Odometry",
-            option="odom_topic",
-            required=False,
-        )
-        read = {t for t in (scan_topic, odom_topic) if t is not None}
-        connections = [c for c in reader.connections if c.topic in read]
-        total = sum(topics[t].msgcount for t in read)
-        ignored = {name: info.msgcount for name, info in topics.items() if name not in read}
-        for connection, receive_ns, msg in _messages(path, reader, connections, total):
-            counts[connection.topic] += 1
-            if connection.topic == scan_topic:
-                raw.append(
-                    _RawScan(
-                        stamp_ns=_stamp_ns(msg, receive_ns),
-                        ranges=np.array(msg.ranges, dtype=np.float32),
-                        angle_min=float(msg.angle_min),
-                        angle_increment=float(msg.angle_increment),
-                        range_max=float(msg.range_max),
-                    )
-                )
-            else:
-                q = msg.pose.pose.orientation
-                pose = (
-                    float(msg.pose.pose.position.x),
-                    float(msg.pose.pose.position.y),
-                    yaw_from_quaternion(float(q.x), float(q.y), float(q.z), float(q.w)),
-                )
-                if all(math.isfinite(v) for v in pose):
-                    odom_ns.append(_stamp_ns(msg, receive_ns))
-                    odom_poses.append(pose)
+        got, scan_topic = _read_messages(path, reader, options)
+        topics = reader.topics
     finally:
-        with suppress(*_BAG_ERRORS):
+        with suppress(*BAG_ERRORS):
             reader.close()
-    if not raw:
+    if not got.raw:
         raise InputError(path, f"no messages on the LaserScan topic {scan_topic}")
-
-    odometry = _odometry_at_scans(raw, odom_ns, odom_poses)
+    mounts, mount_source = _mounts(got, options)
+    odometry = _odometry_at_scans(got.raw, got.odom_ns, got.odom_poses)
     scans = [
         Scan(
             index=i,
@@ -337,8 +317,9 @@ def read_rosbag(path: str | Path, options: ReadOptions | None = None) -> ScanLog
             odometry=None if np.isnan(odometry[i]).any() else odometry[i],
             reference=None,
             line=0,
+            mount=None if mounts is None or mounts[i].is_base else mounts[i],
         )
-        for i, r in enumerate(raw)
+        for i, r in enumerate(got.raw)
     ]
     return ScanLog(
         path=path,
@@ -346,9 +327,20 @@ def read_rosbag(path: str | Path, options: ReadOptions | None = None) -> ScanLog
         scans=scans,
         content_hash=content_hash(path),
         pose_source="odometry" if any(s.odometry is not None for s in scans) else None,
-        ignored_messages=ignored,
-        message_counts=dict(counts),
+        ignored_messages={n: i.msgcount for n, i in topics.items() if n not in got.counts},
+        message_counts=dict(got.counts),
+        mount=scans[0].mount,
+        mount_source=mount_source,
     )
+
+
+def _mounts(got: _Collected, options: ReadOptions) -> tuple[list[LaserMount] | None, str]:
+    """The mount of each scan and where it came from: the options, else tf."""
+    given = mount_from_options(options.laser_pose, options.laser_flipped)
+    if given is not None:
+        return [given] * len(got.raw), "given by --laser-pose/--laser-flipped"
+    found = mount_from_tf(got.tf, got.laser_frame, got.base_frame, [r.stamp_ns for r in got.raw])
+    return found.mounts, found.source
 
 
 def _usable_range_max(scan: _RawScan) -> float:

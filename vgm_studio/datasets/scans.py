@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vgm_studio.core import se2
+from vgm_studio.datasets.mount import LaserMount
 
 PoseSource = Literal["odometry", "reference"]
 
@@ -21,7 +22,8 @@ MIN_VALID_RANGE = 0.01
 class Scan:
     """One 2D laser scan with the sensor poses a log gives for it.
 
-    Poses are of the laser in the world frame as (x, y, θ). Ranges at or beyond
+    Poses are of the scan's frame in the world as (x, y, θ): the robot's base when ``mount``
+    is set (``points`` are placed in the base frame), else the laser's. Ranges at or beyond
     ``max_range`` (the sensor's "no return" value) and below ``MIN_VALID_RANGE`` are not points.
     """
 
@@ -34,6 +36,7 @@ class Scan:
     odometry: NDArray[np.float64] | None = None
     reference: NDArray[np.float64] | None = None
     line: int = 0
+    mount: LaserMount | None = None
 
     @property
     def num_beams(self) -> int:
@@ -48,13 +51,14 @@ class Scan:
         return self.angle_min + self.angle_increment * np.arange(self.num_beams, dtype=np.float64)
 
     def points(self) -> NDArray[np.float64]:
-        """Returns the (N, 2) valid end points in the sensor frame."""
+        """Returns the (N, 2) valid end points in the base frame (the laser's without a mount)."""
         # Compare in float32, as ranges are stored: a no-return written as exactly max_range
         # must not come back as a point 1e-7 m short of it.
         r32 = self.ranges
         keep = (r32 >= MIN_VALID_RANGE) & (r32 < np.float32(self.max_range)) & np.isfinite(r32)
         r, a = r32[keep].astype(np.float64), self.angles()[keep]
-        return np.stack([r * np.cos(a), r * np.sin(a)], axis=1).astype(np.float64)
+        points = np.stack([r * np.cos(a), r * np.sin(a)], axis=1).astype(np.float64)
+        return points if self.mount is None else self.mount.place(points)
 
 
 @dataclass
@@ -67,6 +71,8 @@ class ScanLog:
             reference log's path), None without any.
         skipped_lines: How many malformed lines ``skip_bad_lines`` read past.
         skipped_line_numbers: Their line numbers, in file order.
+        mount: The laser's mount its scans are placed by, None for a laser at the base.
+        mount_source: Where the mount came from (``/tf_static``, ``--laser-pose`` …).
     """
 
     path: Path
@@ -79,6 +85,8 @@ class ScanLog:
     skipped_line_numbers: list[int] = field(default_factory=list)
     ignored_messages: dict[str, int] = field(default_factory=dict)
     message_counts: dict[str, int] = field(default_factory=dict)
+    mount: LaserMount | None = None
+    mount_source: str | None = None
 
     def __len__(self) -> int:
         return len(self.scans)

@@ -106,7 +106,7 @@ def read_source(
             _add_relations(source, reference, min(join.time_tolerance, 1e-3), max_loops)
         else:
             source.params["time_offset"] = join.time_offset
-            _join_reference(source, reference, join)
+            _join_reference(source, reference, join, options)
             joined = sum(s.reference is not None for s in source.log.scans)
             if joined < len(source.log):
                 source.warnings.append(
@@ -149,13 +149,21 @@ def read_slam_source(
                 "relations give no pose per scan; --reference takes a corrected log or a "
                 "log with TRUEPOS (relations go to --relations)",
             )
-        _join_reference(source, reference, join or JoinOptions())
+        _join_reference(source, reference, join or JoinOptions(), options)
     return source
 
 
-def _join_reference(source: LogSource, reference: Path, join: JoinOptions) -> None:
+def _join_reference(
+    source: LogSource, reference: Path, join: JoinOptions, options: ReadOptions
+) -> None:
+    # The log's mount reads the reference too: a CARMEN reference's poses are the laser's,
+    # like the log's, and both must move to the base alike for labels to compare one frame.
+    mount = ReadOptions(laser_pose=options.laser_pose, laser_flipped=options.laser_flipped)
     source.log = with_reference(
-        source.log, open_log(reference), join.time_tolerance, join.time_offset
+        source.log,
+        open_log(reference, mount),
+        join.time_tolerance,
+        join.time_offset,
     )
 
 

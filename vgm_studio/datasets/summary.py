@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from vgm_studio.datasets.mount import mount_line
 from vgm_studio.datasets.scans import ScanLog
 
 
@@ -33,10 +34,13 @@ def summarize(log: ScanLog) -> dict[str, Any]:
         "duration_s": duration,
         "duration_note": duration_note,
         "odometry": log.has_odometry,
+        "odometry_scans": sum(s.odometry is not None for s in log.scans),
         "reference": log.has_reference,
         "reference_origin": log.reference_origin,
         "pose_fields": log.pose_source,
-        "travelled_m": log.travelled_distance(),
+        "travelled_m": log.travelled_distance() if log.has_odometry or log.has_reference else None,
+        "mount": None if log.mount is None else log.mount.to_json(),
+        "mount_line": mount_line(log),
         "skipped_lines": log.skipped_lines,
         "ignored_messages": log.ignored_messages,
     }
@@ -91,14 +95,24 @@ def format_summary(s: dict[str, Any]) -> str:
         ("max range", ", ".join(f"{r:g} m" for r in s["max_range"])),
         ("points per scan", f"{s['mean_points_per_scan']:.0f} (mean)"),
         ("duration", dur),
-        ("odometry", "yes" if s["odometry"] else "no"),
+        ("odometry", _odometry_text(s)),
         ("reference poses", f"yes ({s['reference_origin']})" if s["reference"] else "no"),
         ("scan pose fields", pose_note),
-        ("travelled", f"{s['travelled_m']:.1f} m"),
     ]
+    if s["travelled_m"] is not None:
+        rows.append(("travelled", f"{s['travelled_m']:.1f} m"))
+    rows.append(("laser mount", s["mount_line"]))
     if s["ignored_messages"]:
         rows.append(("ignored", ", ".join(f"{k} ×{v}" for k, v in s["ignored_messages"].items())))
     if s["skipped_lines"]:
         rows.append(("skipped bad lines", str(s["skipped_lines"])))
     width = max(len(k) for k, _ in rows)
     return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+
+def _odometry_text(s: dict[str, Any]) -> str:
+    if s["odometry"]:
+        return "yes"
+    if s.get("odometry_scans"):
+        return f"on {s['odometry_scans']:,} of {s['scans']:,} scans only"
+    return "none"

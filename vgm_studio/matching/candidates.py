@@ -209,8 +209,10 @@ def make_candidates(
     config = config or CandidateConfig()
     thresholds = thresholds or LabelThresholds()
     pairs, notes = plan_pairs(log, config, relations, progress)
+    mount = log.mount
     recorded = {
         **(params or {}),
+        "mount": None if mount is None else {**mount.to_json(), "source": log.mount_source},
         "candidates": asdict(config),
         "labels": asdict(thresholds),
         "matcher": asdict(matcher.config),
@@ -218,29 +220,43 @@ def make_candidates(
     }
     # Absolute, so the edges file still finds its log when read from another folder.
     log_path = str(Path(log.path).resolve())
-    edges = []
-    for p in tqdm(pairs, desc="matching", unit="edge", disable=None if progress else True):
-        result = matcher.match(log.scans[p.a], log.scans[p.b], p.guess)
-        estimate = [float(v) for v in result.estimate]
-        label: Literal["success", "failure", "ambiguous"] | None = None
-        if p.reference is not None:
-            label = reference_label(p.reference, estimate, thresholds)
-        edges.append(
-            Edge(
-                edge_id=edge_id(log.content_hash, p.a, p.b, estimate),
-                log_path=log_path,
-                log_sha256=log.content_hash,
-                a=p.a,
-                b=p.b,
-                timestamp_a=log.scans[p.a].timestamp,
-                timestamp_b=log.scans[p.b].timestamp,
-                kind=p.kind,
-                guess=[float(v) for v in p.guess],
-                estimate=estimate,
-                match=result.figures(),
-                reference=None if p.reference is None else [float(v) for v in p.reference],
-                label=label,
-                params=recorded,
-            )
-        )
-    return edges
+    return [
+        _matched(log, log_path, p, matcher, thresholds, recorded)
+        for p in tqdm(pairs, desc="matching", unit="edge", disable=None if progress else True)
+    ]
+
+
+def _matched(
+    log: ScanLog,
+    log_path: str,
+    pair: _Pair,
+    matcher: ScanMatcher,
+    thresholds: LabelThresholds,
+    recorded: dict[str, Any],
+) -> Edge:
+    """One planned pair matched, and labelled against its reference when it has one."""
+    p = pair
+    result = matcher.match(log.scans[p.a], log.scans[p.b], p.guess)
+    estimate = [float(v) for v in result.estimate]
+    label: Literal["success", "failure", "ambiguous"] | None = None
+    if p.reference is not None:
+        label = reference_label(p.reference, estimate, thresholds)
+    return Edge(
+        # A scan pair matched under another laser mount is another edge.
+        edge_id=edge_id(
+            log.content_hash, p.a, p.b, estimate, "" if log.mount is None else log.mount.id_text()
+        ),
+        log_path=log_path,
+        log_sha256=log.content_hash,
+        a=p.a,
+        b=p.b,
+        timestamp_a=log.scans[p.a].timestamp,
+        timestamp_b=log.scans[p.b].timestamp,
+        kind=p.kind,
+        guess=[float(v) for v in p.guess],
+        estimate=estimate,
+        match=result.figures(),
+        reference=None if p.reference is None else [float(v) for v in p.reference],
+        label=label,
+        params=recorded,
+    )

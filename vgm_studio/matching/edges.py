@@ -23,10 +23,13 @@ LABELS: tuple[str, ...] = ("success", "failure", "ambiguous")
 PoseList = list[float]
 
 
-def edge_id(log_sha256: str, a: int, b: int, estimate: Iterable[float]) -> str:
-    """A stable id: the same log, scans and estimate (to 1e-6) give the same id on every run."""
+def edge_id(log_sha256: str, a: int, b: int, estimate: Iterable[float], mount: str = "") -> str:
+    """A stable id: the same log, scans, laser mount and estimate (to 1e-6) give the same id on
+    every run. ``mount`` is ``LaserMount.id_text()``: empty for a laser at the base, so the ids
+    of edges made before mounts existed stand."""
     est = ",".join(f"{v:.6f}" for v in estimate)
-    return hashlib.sha256(f"{log_sha256}:{a}:{b}:{est}".encode()).hexdigest()[:16]
+    text = f"{log_sha256}:{a}:{b}:{est}" + (f":{mount}" if mount else "")
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 @dataclass

@@ -35,6 +35,9 @@ class MatchResult:
         kiss_moved: How far kiss-icp moved scan b from the guess, metres. Zero means kiss-icp
             returned the guess unchanged (it found too few correspondences to act on).
         kiss_turned: How far kiss-icp turned scan b from the guess, radians (absolute).
+        score: The loop matcher's correlative score (mean likelihood under the points at its
+            grid pose, 0..1); None from this pairwise matcher. The loop matcher reports its grid
+            pose, and how far that moved and turned from the guess, in the ``kiss_*`` fields.
     """
 
     estimate: NDArray[np.float64]
@@ -46,6 +49,7 @@ class MatchResult:
     kiss_estimate: NDArray[np.float64]
     kiss_moved: float = 0.0
     kiss_turned: float = 0.0
+    score: float | None = None
 
     def figures(self) -> dict[str, Any]:
         """The quality figures as JSON-ready values."""
@@ -55,6 +59,9 @@ class MatchResult:
             if d[key] is not None:
                 d[key] = np.asarray(d[key]).tolist()
         d["residual"] = None if not np.isfinite(self.residual) else self.residual
+        if self.score is None:
+            # Pairwise edges keep the figures they always had.
+            d.pop("score")
         return d
 
 

@@ -9,10 +9,12 @@ from pathlib import Path
 from typing import Any
 
 from vgm_studio.datasets import ReadOptions
+from vgm_studio.datasets.scans import ScanLog
 from vgm_studio.datasets.source import JoinOptions, LogSource, read_slam_source
 from vgm_studio.errors import InputError
 from vgm_studio.graph.metrics import RelationErrors
 from vgm_studio.maps.png import write_maps
+from vgm_studio.matching.agreement import check_agreement, disagreement_warning, motions_of
 from vgm_studio.model.registry import BUNDLED_MODEL, VALIDATOR_MODELS
 from vgm_studio.recording import write_recording
 from vgm_studio.services import Say, Voice
@@ -80,6 +82,8 @@ def run_slam_command(
         voice.warn(line)
     result = run_slam(source.log, config)
     say(edge_line(result))
+    for line in _what_is_missing(source.log, result):
+        voice.warn(line)
     errors = errors_of(result, source.relations) if source.relations is not None else None
     if errors is not None:
         say(table(errors))
@@ -122,3 +126,24 @@ def _write_json(path: Path, doc: dict[str, Any]) -> None:
         path.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
     except OSError as exc:
         raise InputError(path, f"cannot write ({exc.strerror or exc})") from None
+
+
+def _what_is_missing(log: ScanLog, result: SlamResult) -> list[str]:
+    """Why a short or still log's outputs are thin, and whether the scans and odometry agree."""
+    lines = []
+    if not any(s.odometry is not None for s in log.scans):
+        lines.append(f"{log.path}: no odometry in this log; kiss-icp alone gives the motion")
+    if len(result.keyframes) < 2:
+        lines.append(
+            f"{log.path}: one keyframe (the robot never moved a keyframe's distance or angle): "
+            "no edges and no loops; the maps and recording hold that one scan"
+        )
+    seq = [e for e in result.edges if e.kind == "sequential"]
+    keys = result.keyframes
+    motions = motions_of(
+        [(int(keys[e.a]), int(keys[e.b])) for e in seq],
+        [e.estimate for e in seq],
+        [e.match.covariance for e in seq],
+    )
+    disagreement = disagreement_warning(log, check_agreement(log, motions))
+    return lines + ([disagreement] if disagreement is not None else [])

@@ -36,9 +36,12 @@ class TrainerOptions:
 
     retrain_every: int = 25
     base: list[Path] = field(default_factory=list)
+    min_held_out: int = 20
 
     @classmethod
-    def checked(cls, retrain_every: int, base: list[Path] | None) -> TrainerOptions:
+    def checked(
+        cls, retrain_every: int, base: list[Path] | None, min_held_out: int = 20
+    ) -> TrainerOptions:
         """Checks the base files now: one missing would crash the trainer over and over.
 
         Raises:
@@ -47,7 +50,7 @@ class TrainerOptions:
         for path in base or []:
             if not path.is_file():
                 raise InputError(path, "no such --base edges file")
-        return cls(retrain_every, [p.resolve() for p in base or []])
+        return cls(retrain_every, [p.resolve() for p in base or []], min_held_out)
 
 
 def _say(line: str) -> None:
@@ -68,6 +71,7 @@ def _start_trainer(studio: Studio, options: TrainerOptions) -> Callable[[], None
         studio.store.workspace,
         options.retrain_every,
         options.base,
+        extra_args=["--min-held-out", str(options.min_held_out)],
         url=store_url(studio.store),
     )
     watcher = PromotionWatcher(

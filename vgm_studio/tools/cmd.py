@@ -56,10 +56,17 @@ def info(
     ],
     read: ReadOptions,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+    check: Annotated[
+        bool,
+        typer.Option(
+            "--check", help="Only check that scan matches agree with odometry (the laser's mount)."
+        ),
+    ] = False,
 ) -> None:
     """Print what a log holds: scans, beams, field of view, duration, poses, distance."""
-    from vgm_studio.services.info import describe
+    from vgm_studio.services import info as service
 
+    describe = service.check if check else service.describe
     typer.echo(describe(log, read, as_json, warn=_warn))
 
 

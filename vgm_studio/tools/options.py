@@ -20,6 +20,7 @@ from typing import Annotated, Any
 import typer
 
 from vgm_studio.datasets import ReadOptions
+from vgm_studio.datasets.mount import parse_laser_pose
 from vgm_studio.errors import InputError
 
 
@@ -203,6 +204,23 @@ NoTrainerOpt = Annotated[
 RetrainOpt = Annotated[
     int, typer.Option(help="The trainer trains after this many new labels.", min=1)
 ]
+MinHeldOutOpt = Annotated[
+    int,
+    typer.Option(
+        min=1, help="Held-out labels of each class a version needs before it is promoted."
+    ),
+]
+
+
+def _laser_pose(value: str | None) -> tuple[float, float, float] | None:
+    """A typer callback: ``--laser-pose X,Y,YAW`` as three finite numbers."""
+    if value is None:
+        return None
+    try:
+        return parse_laser_pose(value)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc)) from None
+
 
 # The read options, in the order ``--help`` shows them; ``with_read_options`` adds them.
 _READ_PARAMETERS: tuple[tuple[str, Any, Any], ...] = (
@@ -242,6 +260,26 @@ _READ_PARAMETERS: tuple[tuple[str, Any, Any], ...] = (
     ),
     ("scan_topic", Annotated[str | None, typer.Option(help="ROS bags: LaserScan topic.")], None),
     ("odom_topic", Annotated[str | None, typer.Option(help="ROS bags: Odometry topic.")], None),
+    (
+        "laser_pose",
+        Annotated[
+            str | None,
+            typer.Option(
+                metavar="X,Y,YAW",
+                help="The laser in the robot's base frame: metres ahead, metres left, degrees.",
+                show_default="from the bag's /tf_static or /tf, else at the base",
+                callback=_laser_pose,
+            ),
+        ],
+        None,
+    ),
+    (
+        "laser_flipped",
+        Annotated[
+            bool, typer.Option(help="The laser is mounted upside down (its scans are mirrored).")
+        ],
+        False,
+    ),
 )
 
 
@@ -254,6 +292,8 @@ def _read_options(values: dict[str, Any]) -> ReadOptions:
         skip_bad_lines=values["skip_bad_lines"],
         scan_topic=values["scan_topic"],
         odom_topic=values["odom_topic"],
+        laser_pose=values["laser_pose"],
+        laser_flipped=values["laser_flipped"],
     )
 
 

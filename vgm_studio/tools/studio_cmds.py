@@ -13,6 +13,7 @@ from vgm_studio.tools.options import (
     AnnotatorOpt,
     HostOpt,
     MaxLoopsOpt,
+    MinHeldOutOpt,
     ModelsDirOpt,
     NoTrainerOpt,
     PortOpt,
@@ -69,6 +70,7 @@ def label(
     ),
     no_trainer: NoTrainerOpt = False,
     retrain_every: RetrainOpt = 25,
+    min_held_out: MinHeldOutOpt = 20,
     base: Annotated[
         list[Path] | None,
         typer.Option("--base", metavar="EDGES.jsonl", help="Labelled edges the trainer also uses."),
@@ -95,7 +97,7 @@ def label(
         opened,
         StudioConfig(host=host, port=port, annotator=annotator or default_annotator()),
         model=choose_model(model, no_model, warn=_warn),
-        trainer=None if no_trainer else TrainerOptions.checked(retrain_every, base),
+        trainer=None if no_trainer else TrainerOptions.checked(retrain_every, base, min_held_out),
         ready_seconds=time.perf_counter() - start,
     )
 

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from vgm_studio.errors import InputError
-from vgm_studio.tools.options import ModelsDirOpt, StoreOpt, store_location
+from vgm_studio.tools.options import MinHeldOutOpt, ModelsDirOpt, StoreOpt, store_location
 
 WorkspaceOrStoreOpt = Annotated[
     Path | None, typer.Option(metavar="DIR", help="Workspace folder (or --store URL).")
@@ -31,12 +31,7 @@ def trainer(
     ] = False,
     epochs: Annotated[int, typer.Option(min=1, help="Epochs at most per version.")] = 12,
     epoch_size: Annotated[int, typer.Option(min=1, help="Class-balanced draws per epoch.")] = 1024,
-    min_held_out: Annotated[
-        int,
-        typer.Option(
-            min=1, help="Held-out labels of each class a version needs before it is promoted."
-        ),
-    ] = 20,
+    min_held_out: MinHeldOutOpt = 20,
 ) -> None:
     """Train model versions from a workspace's labels as they come in (runs until Ctrl-C)."""
     from vgm_studio.trainer.fit import FitConfig

@@ -1,0 +1,180 @@
+"""The loop matcher: max grids, exact branch and bound, convergence from metres off."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from vgm_studio.core import se2
+from vgm_studio.datasets import open_log
+from vgm_studio.matching.correlative import (
+    CorrelativeConfig,
+    LoopMatcher,
+    SearchWindow,
+    angular_step,
+    branch_and_bound,
+    brute_force,
+)
+from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.matching.submap import PEAK, Submap
+from vgm_studio.simulation.simulate import SimConfig, simulate
+
+
+@pytest.fixture(scope="module")
+def office(tmp_path_factory):
+    path = simulate(SimConfig(preset="office", seed=3, laps=0.5), tmp_path_factory.mktemp("sim"))
+    return open_log(path)
+
+
+def submap_around(log, a, depth=7):
+    """A submap of the keyframes around scan a, in a's frame, placed by the true poses."""
+    ref = log.reference_poses()
+    idx = [i for i in range(a - 6, a + 7, 3) if 0 <= i < len(log)]
+    return Submap.from_scans(
+        [log.scans[i] for i in idx], se2.between(ref[a], ref[idx]), depth=depth
+    )
+
+
+def offset(rng, metres, degrees):
+    phi = rng.uniform(0, 2 * np.pi)
+    sign = rng.choice([-1.0, 1.0])
+    return np.array([metres * np.cos(phi), metres * np.sin(phi), sign * np.radians(degrees)])
+
+
+def test_levels_hold_the_max_of_the_block_starting_at_each_cell():
+    rng = np.random.default_rng(0)
+    sub = Submap.from_points(rng.uniform(0, 3, size=(60, 2)), 0.05, depth=4)
+    base = sub.levels[0]
+    nx, ny = base.shape
+    assert base.max() == PEAK
+    for h in range(1, 5):
+        for _ in range(50):
+            i, j = int(rng.integers(0, nx)), int(rng.integers(0, ny))
+            block = base[i : i + 2**h, j : j + 2**h]
+            assert sub.levels[h][i, j] == block.max()
+    # The padding is wider than the largest block, so the outermost cells are empty on all levels.
+    for level in sub.levels:
+        assert level[0].max() == 0 and level[-1].max() == 0
+        assert level[:, 0].max() == 0 and level[:, -1].max() == 0
+
+
+def test_submap_from_scans_checks_its_poses(office):
+    with pytest.raises(ValueError, match="2 scans but 1 poses"):
+        Submap.from_scans(office.scans[:2], np.zeros((1, 3)))
+
+
+def test_angular_step_moves_the_farthest_point_one_cell():
+    pts = np.array([[10.0, 0.0], [1.0, 1.0]])
+    step = angular_step(pts, 0.05)
+    assert step == pytest.approx(0.005, rel=0.01)
+    assert 10.0 * step < 0.05
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4, 5])
+def test_branch_and_bound_equals_brute_force(office, seed):
+    rng = np.random.default_rng(seed)
+    a = int(rng.integers(10, len(office) - 30))
+    b = a + int(rng.integers(3, 20))
+    # A shallow submap, so a window wider than its top block starts from several blocks.
+    sub = submap_around(office, a, depth=int(rng.integers(2, 5)))
+    truth = se2.between(office.reference_poses()[a], office.reference_poses()[b])
+    guess = truth + offset(rng, rng.uniform(0, 0.3), rng.uniform(0, 3))
+    pts = office.scans[b].points()[:: int(rng.integers(1, 4))]
+    window = SearchWindow(linear=0.4, angular=np.radians(3))
+    step = np.radians(0.5)  # coarser than Cartographer's, to keep brute force quick
+    fast = branch_and_bound(sub, pts, guess, window, step=step)
+    slow = brute_force(sub, pts, guess, window, step=step)
+    assert fast is not None and slow is not None
+    assert fast.index == slow.index
+    assert fast.score == slow.score
+    np.testing.assert_allclose(fast.pose, slow.pose)
+    # It is a search, not a walk: it scored fewer candidates than there are poses.
+    assert fast.evaluated < slow.evaluated
+
+
+def test_branch_and_bound_equals_brute_force_on_a_wrong_place(office):
+    # Away from the target nothing fits well: many near-equal poses, pruning is hardest.
+    sub = submap_around(office, 100, depth=3)
+    pts = office.scans[500].points()[::2]
+    window = SearchWindow(linear=0.5, angular=np.radians(4))
+    fast = branch_and_bound(sub, pts, np.zeros(3), window, step=np.radians(1))
+    slow = brute_force(sub, pts, np.zeros(3), window, step=np.radians(1))
+    assert fast is not None and slow is not None
+    assert (fast.index, fast.score) == (slow.index, slow.score)
+
+
+def test_converges_from_2m_and_25deg_where_the_scan_matcher_does_not(office):
+    rng = np.random.default_rng(7)
+    matcher, pairwise = LoopMatcher(), ScanMatcher()
+    window = SearchWindow(linear=3.0, angular=np.radians(30))
+    ref = office.reference_poses()
+    loop_errs, pair_errs = [], []
+    for _ in range(6):
+        a = int(rng.integers(10, len(office) - 40))
+        b = a + int(rng.integers(8, 30))
+        truth = se2.between(ref[a], ref[b])
+        guess = truth + offset(rng, 2.0, 25.0)
+        sub = submap_around(office, a)
+        got = matcher.match(sub, office.scans[a], office.scans[b], guess, window)
+        loop_errs.append(se2.pose_error(truth, got.estimate))
+        old = pairwise.match(office.scans[a], office.scans[b], guess)
+        pair_errs.append(se2.pose_error(truth, old.estimate))
+    loop, pair = np.array(loop_errs), np.array(pair_errs)
+    assert loop[:, 0].max() <= 0.03
+    assert np.degrees(loop[:, 1].max()) < 1.0
+    # Today's matcher, from the same guesses, stays metres off in most of them.
+    assert np.sum(pair[:, 0] > 0.3) >= 4
+
+
+def test_match_figures_are_those_of_the_pair(office):
+    rng = np.random.default_rng(3)
+    a, b = 300, 312
+    ref = office.reference_poses()
+    truth = se2.between(ref[a], ref[b])
+    guess = truth + offset(rng, 1.0, 10.0)
+    got = LoopMatcher().match(
+        submap_around(office, a), office.scans[a], office.scans[b], guess, SearchWindow(2.0, 0.3)
+    )
+    assert got.converged and 1 <= got.iterations <= 30
+    assert 0.5 < got.inlier_ratio <= 1.0
+    assert 0 < got.residual < 0.03
+    assert got.score is not None and 0.5 < got.score <= 1.0
+    cov = np.asarray(got.covariance)
+    assert cov.shape == (3, 3) and np.all(np.linalg.eigvalsh(cov) > 0)
+    assert np.sqrt(cov[0, 0]) < 0.01
+    # The grid pose is within a cell or two of the truth, and the kiss_* fields say how far
+    # the search moved from the guess.
+    assert se2.pose_error(truth, got.kiss_estimate)[0] < 0.1
+    step = se2.between(guess, got.kiss_estimate)
+    assert got.kiss_moved == pytest.approx(float(np.hypot(step[0], step[1])))
+    assert got.kiss_moved > 0.5
+    fig = got.figures()
+    assert fig["score"] == got.score and len(fig["kiss_estimate"]) == 3
+
+
+def test_no_points_or_no_pose_above_min_score_returns_the_guess(office):
+    sub = submap_around(office, 100)
+    empty = replace(
+        office.scans[0], ranges=np.full(office.scans[0].num_beams, 100.0, dtype=np.float32)
+    )
+    guess = np.array([0.1, 0.0, 0.0])
+    window = SearchWindow(1.0, 0.2)
+    got = LoopMatcher().match(sub, office.scans[100], empty, guess, window)
+    np.testing.assert_allclose(got.estimate, guess)
+    assert not got.converged and got.inlier_ratio == 0.0
+    strict = LoopMatcher(CorrelativeConfig(min_score=0.99))
+    got = strict.match(sub, office.scans[100], office.scans[700], guess, window)
+    assert not got.converged and got.score is None
+
+
+def test_pairwise_figures_have_no_score_key(office):
+    fig = ScanMatcher().match(office.scans[10], office.scans[12], np.zeros(3)).figures()
+    assert "score" not in fig and "inlier_ratio" in fig
+
+
+@pytest.mark.parametrize("linear, angular", [(-1.0, 0.1), (1.0, -0.1), (1.0, 4.0)])
+def test_a_window_must_be_a_window(linear, angular):
+    with pytest.raises(ValueError, match="search window"):
+        SearchWindow(linear, angular)

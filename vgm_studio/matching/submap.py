@@ -1,0 +1,208 @@
+"""A likelihood grid of points in one frame, with the max grids branch and bound searches.
+
+The correlative matcher (``correlative.py``) scores a scan pose by summing grid values under the
+scan's end points. Its branch and bound needs, for every height h, an upper bound of that sum
+over a 2^h × 2^h block of translations: level h of ``Submap.levels`` holds, for every cell, the
+largest level-0 value of the 2^h × 2^h block of cells starting there (Cartographer's
+``PrecomputationGrid2D``; Hess et al., "Real-Time Loop Closure in 2D LIDAR SLAM", ICRA 2016,
+section V.C). Summing level h under the scan shifted to a block's corner therefore bounds every
+pose inside the block from above.
+
+Values are quantised to uint8 (0..255) so that scores are integer sums: exact, independent of
+summation order, and the same whether branch and bound or brute force adds them up.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from vgm_studio.core import se2
+from vgm_studio.datasets.scans import Scan
+from vgm_studio.matching.refinement import Target
+
+# Highest value of the grid: a cell holding an end point.
+PEAK = 255
+
+
+@dataclass(frozen=True)
+class Submap:
+    """A likelihood grid of points placed in one frame, with its multi-resolution max grids.
+
+    Cell (i, j) of every level covers x ∈ [origin_x + i·resolution, … + resolution), and the
+    same along y. The grid is padded with ``2^depth`` empty cells on every side, so a block of any
+    level that starts outside the data still sees it; indices clipped into the outermost cells
+    read zero on every level.
+
+    Attributes:
+        points: (N, 2) the points the grid was made from, in the submap frame.
+        resolution: Cell edge, metres.
+        origin: (x, y) of the lower corner of cell (0, 0), metres.
+        levels: Level h is the max over the 2^h × 2^h block starting at each cell; level 0 is
+            the likelihood grid itself. uint8 arrays indexed [i_x, i_y].
+        sigma: Standard deviation of the likelihood around each point, metres.
+        normal_neighbors: Neighbours used to fit each point's local line for the refinement.
+    """
+
+    points: NDArray[np.float64]
+    resolution: float
+    origin: NDArray[np.float64]
+    levels: tuple[NDArray[np.uint8], ...]
+    sigma: float
+    normal_neighbors: int = 6
+    _target: list[Target] = field(default_factory=list, repr=False, compare=False)
+    _padded: dict[int, tuple[NDArray[np.uint8], ...]] = field(
+        default_factory=dict, repr=False, compare=False
+    )
+
+    @property
+    def depth(self) -> int:
+        """The highest precomputed level."""
+        return len(self.levels) - 1
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (int(self.levels[0].shape[0]), int(self.levels[0].shape[1]))
+
+    @classmethod
+    def from_points(
+        cls,
+        points: NDArray[np.float64],
+        resolution: float = 0.05,
+        *,
+        sigma: float | None = None,
+        depth: int = 7,
+        normal_neighbors: int = 6,
+    ) -> Submap:
+        """Builds the grid and its max levels from points in the submap frame.
+
+        Args:
+            points: (N, 2) end points, N ≥ 1.
+            resolution: Cell edge, metres.
+            sigma: Standard deviation of the Gaussian likelihood around each point, metres;
+                defaults to the resolution (a point's own cell scores 255, its neighbours ~155).
+            depth: Highest level to precompute; branch and bound over windows wider than
+                2^depth cells starts from several top blocks.
+            normal_neighbors: Neighbours used to fit local lines for the refinement.
+
+        Raises:
+            ValueError: No points, a resolution ≤ 0 or a negative depth.
+        """
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        if len(pts) == 0:
+            raise ValueError("a submap needs at least one point")
+        if resolution <= 0 or depth < 0:
+            raise ValueError("resolution must be positive and depth non-negative")
+        sig = float(sigma) if sigma is not None else resolution
+        pad = 2**depth + math.ceil(3.0 * sig / resolution) + 1
+        lo = np.floor(pts.min(axis=0) / resolution) * resolution - pad * resolution
+        cells = np.floor((pts - lo) / resolution).astype(np.intp)
+        shape = (int(cells[:, 0].max()) + pad + 1, int(cells[:, 1].max()) + pad + 1)
+        base = _likelihood(cells, shape, sig / resolution)
+        return cls(
+            points=pts,
+            resolution=float(resolution),
+            origin=lo,
+            levels=_max_levels(base, depth),
+            sigma=sig,
+            normal_neighbors=normal_neighbors,
+        )
+
+    @classmethod
+    def from_scans(
+        cls,
+        scans: Sequence[Scan],
+        poses: NDArray[np.float64],
+        resolution: float = 0.05,
+        *,
+        max_range: float = 30.0,
+        **kw: float | int | None,
+    ) -> Submap:
+        """Places several scans in one frame and builds their grid.
+
+        Args:
+            scans: The scans (keyframes around the loop target, say).
+            poses: (M, 3) each scan's pose in the submap frame.
+            resolution: Cell edge, metres.
+            max_range: Readings farther than this are left out.
+            **kw: Passed on to ``from_points`` (sigma, depth, normal_neighbors).
+
+        Raises:
+            ValueError: Scans and poses differ in number, or no scan has a point in range.
+        """
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        if len(poses) != len(scans):
+            raise ValueError(f"{len(scans)} scans but {len(poses)} poses")
+        parts = []
+        for scan, pose in zip(scans, poses, strict=True):
+            pts = scan.points()
+            pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= max_range]
+            parts.append(se2.transform_points(pose, pts))
+        merged = np.concatenate(parts) if parts else np.empty((0, 2))
+        return cls.from_points(merged, resolution, **kw)  # type: ignore[arg-type]
+
+    def target(self) -> Target:
+        """The points prepared for point-to-line refinement (k-d tree, normals), built once."""
+        if not self._target:
+            self._target.append(Target.build(self.points, self.normal_neighbors))
+        return self._target[0]
+
+    def padded(self, extra: int) -> tuple[NDArray[np.uint8], ...]:
+        """The levels with ``extra`` more empty cells on every side (cell (i, j) becomes
+        (i + extra, j + extra)), kept for the next query that needs the same padding.
+
+        Padding is exact: every block starting in it covers only empty cells, as the grid's own
+        padding is wider than the largest block.
+        """
+        if extra not in self._padded:
+            self._padded[extra] = tuple(_pad(level, extra) for level in self.levels)
+        return self._padded[extra]
+
+    def cells(self, points: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Cell indices (i_x, i_y) of points in the submap frame, not clipped."""
+        c = np.floor((np.asarray(points, dtype=np.float64) - self.origin) / self.resolution)
+        return c[:, 0].astype(np.intp), c[:, 1].astype(np.intp)
+
+
+def _likelihood(
+    cells: NDArray[np.intp], shape: tuple[int, int], sigma_cells: float
+) -> NDArray[np.uint8]:
+    """Gaussian of the distance to the nearest occupied cell, quantised to 0..PEAK."""
+    free = np.full(shape, 255, dtype=np.uint8)
+    free[cells[:, 0], cells[:, 1]] = 0
+    # The exact Euclidean distance in cells from every cell to the nearest occupied one.
+    dist = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    value = PEAK * np.exp(-0.5 * (dist / max(sigma_cells, 1e-9)) ** 2)
+    # Cut at 3σ, so the padding around the data (wider than 3σ) is exactly zero.
+    value[dist > 3.0 * sigma_cells] = 0.0
+    return np.asarray(np.rint(value), dtype=np.uint8)
+
+
+def _pad(grid: NDArray[np.uint8], extra: int) -> NDArray[np.uint8]:
+    # Zeros plus one slice copy: several times faster than np.pad.
+    out = np.zeros((grid.shape[0] + 2 * extra, grid.shape[1] + 2 * extra), dtype=grid.dtype)
+    out[extra : extra + grid.shape[0], extra : extra + grid.shape[1]] = grid
+    return out
+
+
+def _max_levels(base: NDArray[np.uint8], depth: int) -> tuple[NDArray[np.uint8], ...]:
+    """Levels 0..depth: the max over the 2^h × 2^h block starting at each cell.
+
+    Each level is two shifted maxima of the one below (a 2^h block is four 2^(h−1) blocks),
+    with zeros beyond the grid's far edges.
+    """
+    levels = [base]
+    for h in range(1, depth + 1):
+        s = 2 ** (h - 1)
+        prev = levels[-1]
+        along_x = prev.copy()
+        np.maximum(along_x[:-s], prev[s:], out=along_x[:-s])
+        both = along_x.copy()
+        np.maximum(both[:, :-s], along_x[:, s:], out=both[:, :-s])
+        levels.append(both)
+    return tuple(levels)
