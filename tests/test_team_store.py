@@ -114,18 +114,18 @@ def test_one_trainer_per_store(url, tmp_path):
 
 
 def test_a_trainer_on_a_team_store_registers_versions_next_to_it_and_is_alone(
-    pg_server, office_edges, tmp_path
+    pg_server, balanced_office_edges, tmp_path
 ):
     from typer.testing import CliRunner
 
-    from tests.test_trainer import FAST, SMALL, _balanced, _models_app
+    from tests.test_trainer import FAST, SMALL, _models_app
     from vgm_studio.trainer import registry
     from vgm_studio.trainer.worker import Job, TrainerConfig, Worker
 
     url = pg_server("trainer")
     models = tmp_path / "team.models"
     store = PgLabelStore(url, models_dir=models)
-    edges = _balanced(office_edges)
+    edges = read_edges(balanced_office_edges)
     store.add_edges(edges)
     for e in edges:
         store.label(e.edge_id, "bot", str(e.label))
