@@ -119,7 +119,7 @@ def test_sql_lives_in_labels_only():
     users = {
         _module(p)
         for p in PACKAGE.rglob("*.py")
-        if "sqlite3" in _imports(p) and _part(_module(p)) != "labels"
+        if {"sqlite3", "psycopg"} & set(_imports(p)) and _part(_module(p)) != "labels"
     }
     assert users <= allowed
 

@@ -14,6 +14,7 @@ from vgm_studio.core.hashing import content_hash
 from vgm_studio.datasets import ReadOptions
 from vgm_studio.datasets.source import JoinOptions, read_source
 from vgm_studio.errors import InputError, require_utf8_path
+from vgm_studio.labels.opening import open_store
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.matching.candidates import CandidateConfig, make_candidates
 from vgm_studio.matching.edge_scans import check_viewable
@@ -157,14 +158,16 @@ def choose_model(
 
 def open_demo(
     workspace: Path,
+    url: str | None = None,
     *,
     predict: bool = False,
     precision: float | None = None,
     say: Say = _quiet,
     warn: Say = _quiet,
 ) -> tuple[LabelStore, Path | None]:
-    """The demo workspace, filled from the bundled demo log; with the bundled model's
-    predictions stored when ``predict`` (else the server makes them in the background).
+    """The demo workspace (or team store at ``url``), filled from the bundled demo log; with
+    the bundled model's predictions stored when ``predict`` (else the server makes them in
+    the background).
 
     Returns:
         The store and the bundled model (None when it is missing).
@@ -178,7 +181,7 @@ def open_demo(
             "bundled demo log missing; remake it with: "
             "vgm-studio simulate --out datasets --preset demo --seed 0",
         )
-    store = LabelStore(workspace)
+    store = open_store(workspace, url)
     fill_workspace(store, DEMO_LOG, None, ReadOptions(), max_loops=DEMO_LOOPS, say=say, warn=warn)
     model = choose_model(None, precision=precision, warn=warn)
     if predict and model is not None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 from vgm_studio.labels.records import (
     Event,
@@ -47,6 +47,18 @@ class TrainerRepository(Protocol):
         self, dealer: Callable[[dict[str, int]], list[tuple[str, int]]]
     ) -> dict[str, int]: ...
     def view(self) -> TrainerView: ...
+
+
+@runtime_checkable
+class SharedStore(Protocol):
+    """What a store shared by several servers adds (the team store, ``postgres.py``): claims
+    that hold across servers, and word when the connection to the server is lost and back."""
+
+    def claim(
+        self, edge_id: str, holder: str, seconds: float = ..., unlabelled: bool = ...
+    ) -> bool: ...
+    def release(self, holder: str) -> None: ...
+    def on_connection(self, report: Callable[[str | None], None]) -> None: ...
 
 
 class LabelRepository(Protocol):

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from vgm_studio.errors import InputError
+from vgm_studio.labels.opening import store_url
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.studio.app import Studio, StudioConfig
 from vgm_studio.studio.gate import is_loopback
@@ -77,6 +78,7 @@ def _start_trainer(studio: Studio, options: TrainerOptions) -> Callable[[], None
         options.retrain_every,
         options.base,
         extra_args=["--min-held-out", str(options.min_held_out)],
+        url=store_url(studio.store),
     )
     watcher = PromotionWatcher(
         studio.store,

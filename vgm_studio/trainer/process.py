@@ -30,6 +30,7 @@ def run_trainer(
     config: TrainerConfig,
     parent_pid: int | None = None,
     say: Callable[[str], None] = _to_stderr,
+    url: str | None = None,
 ) -> None:
     """Trains versions from a workspace's labels as they come in, until stopped.
 
@@ -41,9 +42,9 @@ def run_trainer(
     for path in config.base:
         if not path.is_file():
             raise InputError(path, "no such edges file")
-    worker = Worker(workspace, config, parent_pid=parent_pid, log=say)
+    worker = Worker(workspace, config, parent_pid=parent_pid, log=say, url=url)
     say(
-        f"trainer: watching {workspace} (a version every {config.retrain_every} labels; "
+        f"trainer: watching {url or workspace} (a version every {config.retrain_every} labels; "
         "Ctrl-C stops)"
     )
     _stop_on_sigterm()
@@ -66,6 +67,7 @@ def _parser() -> argparse.ArgumentParser:
     fit = FitConfig()
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
     parser.add_argument("--workspace", type=Path, required=True)
+    parser.add_argument("--store", default=None)  # a team store; --workspace holds its models
     parser.add_argument("--retrain-every", type=int, default=TrainerConfig.retrain_every)
     parser.add_argument("--base", type=Path, action="append", default=[])
     parser.add_argument("--from-scratch", action="store_true")
@@ -86,4 +88,6 @@ def main(argv: Sequence[str] | None = None) -> None:
         fit=FitConfig(epochs=args.epochs, epoch_size=args.epoch_size),
         promotion=PromotionRule(min_per_class=args.min_held_out),
     )
-    exit_on_error(PROG, lambda: run_trainer(args.workspace, config, args.parent_pid))
+    exit_on_error(
+        PROG, lambda: run_trainer(args.workspace, config, args.parent_pid, url=args.store)
+    )

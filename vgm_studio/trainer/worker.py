@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 from vgm_studio.errors import InputError
+from vgm_studio.labels.opening import open_store
 from vgm_studio.labels.records import NewVersion
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.model.checkpoint import Checkpoint, load_checkpoint
@@ -89,12 +90,14 @@ class Worker:
         config: TrainerConfig,
         parent_pid: int | None = None,
         log: Callable[[str], None] = print,
+        url: str | None = None,
     ) -> None:
         self.config = config
         self.log = log
         self.parent_pid = parent_pid
-        self.store = LabelStore(workspace, create=False, durable=False)
-        self._lock = _take_lock(self.store.workspace)
+        self.store = open_store(workspace, url, create=False, durable=False)
+        # A team store's lock lives in the database, so trainers on other hosts see it too.
+        self._lock = _take_lock(self.store.workspace) if url is None else _team_lock_of(self.store)
         self.cache = SampleCache(self.store)
         self.base = BaseSet.read(config.base, config.held_out, config.fit.seed)
         self._guard_cache: tuple[str, Scored | None] | None = None
@@ -313,6 +316,13 @@ def _be_polite(config: TrainerConfig) -> None:
         # (p95 label latency 114 → 184 ms on two cores); SCHED_IDLE runs it only on idle time.
         with contextlib.suppress(AttributeError, OSError):  # not Linux
             os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+
+
+def _team_lock_of(store: LabelStore) -> LabelStore:
+    """The team store's trainer lock: a session advisory lock the server frees with the
+    connection, so a killed trainer on any host leaves none behind."""
+    store.trainer_lock()  # type: ignore[attr-defined]
+    return store  # the lock is held as long as the store's connection
 
 
 def _take_lock(workspace: Path) -> Any:
