@@ -19,6 +19,8 @@ import argparse
 import json
 import os
 import shutil
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -31,7 +33,6 @@ from vgm_studio.model.registry import BUNDLED_MODEL
 from vgm_studio.services.fleet import RayOptions, run_fleet
 from vgm_studio.services.fleet_log import FleetSettings
 from vgm_studio.slam.config import SlamConfig, ValidationConfig
-from vgm_studio.tools import cmd
 
 OUT = REPO / "build" / "fleet"
 TARGET_RATIO = 1.6
@@ -78,7 +79,8 @@ def same_figures(row: dict[str, Any], tmp: Path) -> str:
     args = ["slam", row["log"], "--json", str(single)]
     if row["relations"]:
         args += ["--relations", row["relations"]]
-    cmd.main(args)
+    # The command itself, as a user runs it: the benchmark compares against the CLI's output.
+    subprocess.run([sys.executable, "-m", "vgm_studio.tools.cmd", *args], check=True)
     a = json.loads(Path(row["slam_json"]).read_text())
     b = json.loads(single.read_text())
     for key in set(a) | set(b):

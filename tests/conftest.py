@@ -55,3 +55,55 @@ def office_edges(tmp_path_factory) -> Path:
     path = folder / "edges.jsonl"
     write_edges(path, edges)
     return path
+
+
+@pytest.fixture(scope="session")
+def pg_server():
+    """A real PostgreSQL server from Debian's binaries on a free loopback port, for the session.
+
+    Yields a callable ``(name) -> URL`` that makes a fresh database (``.restart()`` restarts the
+    server); the server is stopped and its folder removed at the end. Skipped without the
+    binaries, but required when CI=true.
+    """
+    from benchmarks.pg_local import LocalPostgres, pg_bin
+
+    bindir = pg_bin()
+    if bindir is None:
+        reason = "PostgreSQL binaries not found (/usr/lib/postgresql/*/bin; apt install postgresql)"
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(f"CI=true but {reason}")
+        pytest.skip(reason)
+    server = LocalPostgres(bindir)
+    server.start()
+
+    def new_database(name: str = "t") -> str:
+        return server.new_database(name)
+
+    new_database.restart = server.restart  # type: ignore[attr-defined]
+    try:
+        yield new_database
+    finally:
+        server.stop()
+
+
+@pytest.fixture(scope="session")
+def balanced_office_edges(office_edges) -> Path:
+    """The office edges' successes, each sequential one also moved by 0.6 m / 9° as a failure
+    (at most 80): the office log's matches nearly all succeed, and a trainer needs both
+    classes to learn from. Written beside the office edges; the scans are the same log's."""
+    from dataclasses import replace
+
+    from vgm_studio.matching.edges import edge_id, read_edges, write_edges
+
+    out = []
+    for e in read_edges(office_edges):
+        if e.label != "success":
+            continue
+        out.append(e)
+        if e.kind == "sequential" and len(out) < 160:
+            est = [e.estimate[0] + 0.6, e.estimate[1] - 0.4, e.estimate[2] + 0.15]
+            moved = edge_id(e.log_sha256, e.a, e.b, est)
+            out.append(replace(e, edge_id=moved, estimate=est, label="failure"))
+    path = office_edges.parent / "balanced.jsonl"
+    write_edges(path, out)
+    return path

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from vgm_studio.matching.edge_scans import EdgeScans
@@ -65,3 +67,26 @@ def test_queues_order_edges_as_named():
     assert order(Queue.uncertain, Snapshot(ids, labels=snap.labels)) == ["a", "c", "b", "d", "e"]
     assert human_label({"ana": "success", "ben": "failure"}) is None
     assert human_label({"ana": "success", "ben": "failure", "cy": "failure"}) == "failure"
+
+
+def test_the_trainer_line_names_the_model_shown_and_why_a_version_waits():
+    from vgm_studio.studio.panel import trainer_text
+    from vgm_studio.trainer import TrainerStatus
+
+    why = "v1: held-out accuracy 1.000 on 3 edges; not promoted, …: held-out set too small"
+    status = TrainerStatus(
+        state="idle",
+        epoch=0,
+        epochs=0,
+        metrics={},
+        labels_since=4,
+        active_version=None,
+        updated_at=None,
+        message=why,
+        pending_request=False,
+        active_model="vgmnet-default.pt:0123456789ab",
+    )
+    text = trainer_text(status)
+    assert "model vgmnet-default.pt" in text and "none yet" not in text
+    assert why in text and "4 labels since" in text
+    assert "none yet" in trainer_text(replace(status, active_model=None))

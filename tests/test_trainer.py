@@ -1,8 +1,7 @@
 """The background trainer: versions, promotion, predictions, a killed trainer, export.
 
 Real SQLite, real torch training (small epochs) on a simulated office workspace whose labels
-are the edges' reference labels. The office log's matches nearly all succeed, so each
-sequential edge also appears moved by 0.6 m / 9° as a failure: a balanced set to learn from.
+are the edges' reference labels (``balanced_office_edges``: a balanced set to learn from).
 """
 
 from __future__ import annotations
@@ -20,32 +19,24 @@ import typer
 from typer.testing import CliRunner
 
 from vgm_studio.errors import InputError
+from vgm_studio.labels import versions
+from vgm_studio.labels.records import NewVersion
 from vgm_studio.labels.store import LabelStore
-from vgm_studio.matching.edges import Edge, edge_id, read_edges
+from vgm_studio.matching.edges import Edge, read_edges
 from vgm_studio.model import Validator
 from vgm_studio.tools import trainer_cmds
 from vgm_studio.trainer import PromotionWatcher, registry
 from vgm_studio.trainer.dataset import held_out_split, majority_labels
 from vgm_studio.trainer.fit import FitConfig
+from vgm_studio.trainer.promotion import PromotionRule
 from vgm_studio.trainer.supervisor import Backoff, TrainerSupervisor
 from vgm_studio.trainer.worker import Job, TrainerConfig, Worker
 
 # The made-up failures below keep their success's matcher figures and covariance, so the
 # spread would only be noise here: these tests are about the trainer, not the features.
 FAST = FitConfig(epochs=6, epoch_size=256, batch_size=16, lr=1e-2, hyper={"figures": True})
-
-
-def _balanced(path: Path, failures: int = 80) -> list[Edge]:
-    out = []
-    for e in read_edges(path):
-        if e.label != "success":
-            continue
-        out.append(e)
-        if e.kind == "sequential" and len(out) < 2 * failures:
-            est = [e.estimate[0] + 0.6, e.estimate[1] - 0.4, e.estimate[2] + 0.15]
-            moved = edge_id(e.log_sha256, e.a, e.b, est)
-            out.append(replace(e, edge_id=moved, estimate=est, label="failure"))
-    return out
+# These workspaces hold out ~16 edges of a class; the default minimum (20) has its own test.
+SMALL = PromotionRule(min_per_class=5)
 
 
 def _workspace(folder: Path, edges: list[Edge], labelled: int | None = None) -> LabelStore:
@@ -66,8 +57,8 @@ def _keep_torch_threads():
 
 
 @pytest.fixture(scope="module")
-def edges(office_edges) -> list[Edge]:
-    return _balanced(office_edges)
+def edges(balanced_office_edges) -> list[Edge]:
+    return read_edges(balanced_office_edges)
 
 
 @pytest.fixture(scope="module")
@@ -77,7 +68,8 @@ def trained(tmp_path_factory, edges) -> Path:
     store = _workspace(folder, edges)
     store.set_predictions("before", {e.edge_id: 0.5 for e in edges}, 0.5)
     store.close()
-    worker = Worker(folder, TrainerConfig(nice=0, fit=FAST), log=lambda _s: None)
+    config = TrainerConfig(nice=0, fit=FAST, promotion=SMALL)
+    worker = Worker(folder, config, log=lambda _s: None)
     assert worker.cycle(Job(from_scratch=False, request=0)) == 1
     worker.store.close()
     return folder
@@ -109,7 +101,9 @@ def test_a_worse_version_is_registered_but_not_promoted(trained, tmp_path):
     folder = _copy(trained, tmp_path)
     before = LabelStore(folder, create=False).predictions()
     # A learning rate of ~0 from scratch: a network no better than its random start.
-    bad = TrainerConfig(nice=0, fit=replace(FAST, lr=1e-9, epochs=1, epoch_size=32))
+    bad = TrainerConfig(
+        nice=0, fit=replace(FAST, lr=1e-9, epochs=1, epoch_size=32), promotion=SMALL
+    )
     worker = Worker(folder, bad, log=lambda _s: None)
     assert worker.cycle(Job(from_scratch=True, request=registry.request_training(worker.store)))
     v1, v2 = registry.list_models(worker.store)
@@ -148,9 +142,10 @@ def test_register_is_all_or_nothing_and_orphans_are_removed(tmp_path, edges, mon
     def die(*_args, **_kwargs):
         raise KeyboardInterrupt  # the process stopped between the rename and the commit
 
-    monkeypatch.setattr(store, "set_predictions", die)
+    monkeypatch.setattr(versions, "set_predictions", die)
     with pytest.raises(KeyboardInterrupt):
-        registry.register_model(store, pending, {}, 10, 1.0, True, {e.edge_id: 0.9 for e in edges})
+        new = NewVersion(pending, {}, 10, 1.0, True, {e.edge_id: 0.9 for e in edges})
+        registry.register_model(store, new)
     assert registry.list_models(store) == []
     assert store.predictions().model == "before"
     assert registry.remove_orphans(store) == [tmp_path / "ws" / "models" / "v1.pt"]
@@ -198,7 +193,7 @@ def test_a_killed_trainer_leaves_the_store_consistent_and_is_restarted(tmp_path,
     supervisor = TrainerSupervisor(
         folder,
         retrain_every=25,
-        extra_args=["--epochs", "8", "--epoch-size", "128"],
+        extra_args=["--epochs", "8", "--epoch-size", "128", "--min-held-out", "5"],
         backoff=Backoff(first=0.2),
     )
     supervisor.start()
@@ -272,3 +267,43 @@ def test_a_trainer_that_fails_says_why(trained, tmp_path, monkeypatch):
         worker.run()
     status = registry.trainer_status(worker.store)
     assert (status.state, status.message) == ("crashed", "RuntimeError: out of memory")
+
+
+def test_a_version_judged_on_a_few_failures_is_not_promoted(tmp_path, edges):
+    """Issue 16's case: 14 labels (2 success, 12 failure), 3 held-out failures, the bundled
+    model's p(success) in use. v1 scored 3/3 there but called nearly every success a failure;
+    it must wait for a held-out set that can decide, and say so."""
+    successes = [e for e in edges if e.label == "success"][:2]
+    failures = [e for e in edges if e.label == "failure"][:12]
+    labelled = successes + failures
+    store = _workspace(tmp_path / "ws", labelled)
+    store.set_predictions(
+        "vgmnet-default.pt:0123456789ab", {e.edge_id: 0.9 for e in labelled}, 0.34
+    )
+    before = store.predictions()
+    config = TrainerConfig(nice=0, fit=FAST, held_out=0.25, min_per_class=2)
+    worker = Worker(tmp_path / "ws", config, log=lambda _s: None)
+    assert worker.cycle(Job(from_scratch=False, request=0)) == 1
+    [v1] = registry.list_models(worker.store)
+    assert v1.metrics["counts"]["held_out"] == {"success": 0, "failure": 3}
+    assert (v1.promoted, v1.active) == (False, False)
+    assert "too small to decide" in v1.metrics["compared"]["reason"]
+    assert worker.store.predictions() == before
+    status = registry.trainer_status(worker.store)
+    assert "not promoted" in status.message and "needs 20 of each" in status.message
+    assert status.active_model == before.model
+    listed = CliRunner().invoke(_models_app(), ["--workspace", str(tmp_path / "ws")])
+    assert "not promoted" in listed.output and "too small to decide" in listed.output
+
+
+def test_labels_since_leave_out_undone_labels(tmp_path, edges):
+    store = _workspace(tmp_path / "ws", edges[:6], labelled=0)
+    made = [store.label(e.edge_id, "ana", "success") for e in edges[:4]]
+    store.undo(made[-1].id)
+    assert registry.trainer_status(store).labels_since == 3
+
+
+def _models_app() -> typer.Typer:
+    app = typer.Typer()
+    app.command()(trainer_cmds.models)
+    return app

@@ -14,6 +14,7 @@ from vgm_studio.core.hashing import content_hash
 from vgm_studio.datasets import ReadOptions
 from vgm_studio.datasets.source import JoinOptions, read_source
 from vgm_studio.errors import InputError, require_utf8_path
+from vgm_studio.labels.opening import open_store
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.matching.candidates import CandidateConfig, make_candidates
 from vgm_studio.matching.edge_scans import check_viewable
@@ -22,7 +23,6 @@ from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.model.checkpoint import load_checkpoint, precision_threshold
 from vgm_studio.model.registry import BUNDLED_MODEL
 from vgm_studio.model.validator import Validator
-from vgm_studio.trainer.registry import list_models
 
 REPO = Path(__file__).resolve().parents[1]
 DEMO_LOG = REPO / "datasets" / "demo-seed0.log"
@@ -47,9 +47,8 @@ def fill_workspace(
     reference: Path | None,
     options: ReadOptions,
     max_loops: int = 2000,
-    time_offset: float = 0.0,
+    join: JoinOptions | None = None,
     *,
-    time_tolerance: float = JoinOptions.time_tolerance,
     say: Say = _quiet,
     warn: Say = _quiet,
 ) -> int:
@@ -61,8 +60,7 @@ def fill_workspace(
         reference: A log's reference: a corrected log, a TRUEPOS log or relations.
         options: How to read the log.
         max_loops: Loop candidates at most.
-        time_offset: Seconds added to a reference log's timestamps.
-        time_tolerance: Reference timestamps match within this many seconds.
+        join: How a reference log's timestamps are joined to the scans.
         say: Told what is being made.
         warn: Told what went amiss in reading.
 
@@ -86,9 +84,7 @@ def fill_workspace(
         edges = [edge for _, edge in rows]
         kind = "edges"
     else:
-        found = read_source(
-            source, options, reference, JoinOptions(time_tolerance, time_offset), max_loops
-        )
+        found = read_source(source, options, reference, join or JoinOptions(), max_loops)
         for line in found.warnings:
             warn(line)
         say(f"making candidate edges of {source} (once; kept in {store.workspace})")
@@ -115,7 +111,7 @@ def predict_workspace(
     reaches it. A workspace whose trainer has versions keeps the active one: nothing is done
     then.
     """
-    if list_models(store):
+    if store.versions.all():
         return
     key = f"{model.name}:{content_hash(model)[:12]}"
     if precision is not None:
@@ -162,14 +158,16 @@ def choose_model(
 
 def open_demo(
     workspace: Path,
+    url: str | None = None,
     *,
     predict: bool = False,
     precision: float | None = None,
     say: Say = _quiet,
     warn: Say = _quiet,
 ) -> tuple[LabelStore, Path | None]:
-    """The demo workspace, filled from the bundled demo log; with the bundled model's
-    predictions stored when ``predict`` (else the server makes them in the background).
+    """The demo workspace (or team store at ``url``), filled from the bundled demo log; with
+    the bundled model's predictions stored when ``predict`` (else the server makes them in
+    the background).
 
     Returns:
         The store and the bundled model (None when it is missing).
@@ -183,7 +181,7 @@ def open_demo(
             "bundled demo log missing; remake it with: "
             "vgm-studio simulate --out datasets --preset demo --seed 0",
         )
-    store = LabelStore(workspace)
+    store = open_store(workspace, url)
     fill_workspace(store, DEMO_LOG, None, ReadOptions(), max_loops=DEMO_LOOPS, say=say, warn=warn)
     model = choose_model(None, precision=precision, warn=warn)
     if predict and model is not None:

@@ -48,7 +48,8 @@ def transform_points(pose: ArrayLike, points: ArrayLike) -> NDArray[np.float64]:
     pts = np.asarray(points, dtype=np.float64)
     c, s = np.cos(pose[2]), np.sin(pose[2])
     rot = np.array([[c, -s], [s, c]])
-    return pts @ rot.T + pose[:2]
+    moved: NDArray[np.float64] = pts @ rot.T + pose[:2]
+    return moved
 
 
 def to_matrix(pose: ArrayLike) -> NDArray[np.float64]:

@@ -1,5 +1,17 @@
-"""Human labels: the workspace's SQLite label store, and labels in and out of it."""
+"""Human labels: the workspace's label store, annotators' votes, and labels in and out of it.
 
-from vgm_studio.labels.store import HUMAN_LABELS, LabelRecord, LabelStore
+``LabelStore`` (SQLite) implements ``LabelRepository``; it hands out records, never SQL.
+"""
 
-__all__ = ["HUMAN_LABELS", "LabelRecord", "LabelStore"]
+from vgm_studio.labels.records import LabelRecord, ModelRecord, Predictions
+from vgm_studio.labels.repository import LabelRepository
+from vgm_studio.labels.store import HUMAN_LABELS, LabelStore
+
+__all__ = [
+    "HUMAN_LABELS",
+    "LabelRecord",
+    "LabelRepository",
+    "LabelStore",
+    "ModelRecord",
+    "Predictions",
+]

@@ -5,107 +5,32 @@ Every label, skip and undo is its own committed transaction, appended to ``event
 process killed at any instant leaves both consistent. Labels are keyed by the stable
 ``edge_id`` and by annotator: candidates made again from the same log keep their labels, and
 two annotators who disagree are both kept (a conflict).
+
+The store is sealed: it hands out records (``records.py``), never a connection; model
+versions and the trainer's tables are its ``versions`` and ``trainer`` parts. It is the
+SQLite implementation of ``repository.LabelRepository``.
 """
 
 from __future__ import annotations
 
 import json
-import sqlite3
-import threading
-from collections.abc import Iterable, Iterator
-from contextlib import AbstractContextManager, contextmanager
-from dataclasses import dataclass
-from datetime import datetime, timezone
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from vgm_studio import __version__
 from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.errors import InputError
-from vgm_studio.labels.check import check_workspace, check_writable
+from vgm_studio.labels.database import DB_NAME, Database, now
+from vgm_studio.labels.records import Event, LabelRecord, Predictions
+from vgm_studio.labels.repository import LabelRepository
 from vgm_studio.labels.schema import aware
+from vgm_studio.labels.trainer_tables import TrainerTables
+from vgm_studio.labels.versions import ModelVersions, set_predictions
 from vgm_studio.matching.edges import Edge
 
-SCHEMA = 1
-FORMAT = "vgm-studio-workspace"
-DB_NAME = "labels.sqlite"
 HUMAN_LABELS: tuple[str, ...] = ("success", "failure")
-_HINT = "; the workspace folder and its files must be writable (not read-only or immutable)"
 
-_TABLES = """
-CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-CREATE TABLE sources (
-    sha256 TEXT PRIMARY KEY, path TEXT NOT NULL, kind TEXT NOT NULL,
-    edges INTEGER NOT NULL, added_at TEXT NOT NULL);
-CREATE TABLE edges (
-    edge_id TEXT PRIMARY KEY, position INTEGER NOT NULL UNIQUE, kind TEXT NOT NULL,
-    reference_label TEXT, body TEXT NOT NULL);
-CREATE TABLE events (
-    id INTEGER PRIMARY KEY AUTOINCREMENT,
-    edge_id TEXT NOT NULL REFERENCES edges(edge_id),
-    annotator TEXT NOT NULL,
-    action TEXT NOT NULL CHECK (action IN ('label', 'skip', 'undo', 'import')),
-    label TEXT CHECK (label IN ('success', 'failure')),
-    note TEXT NOT NULL DEFAULT '',
-    made_at TEXT NOT NULL,
-    undoes INTEGER REFERENCES events(id),
-    prev_label TEXT, prev_note TEXT, prev_labeled_at TEXT, prev_event INTEGER);
-CREATE TABLE labels (
-    edge_id TEXT NOT NULL REFERENCES edges(edge_id),
-    annotator TEXT NOT NULL,
-    label TEXT NOT NULL CHECK (label IN ('success', 'failure')),
-    note TEXT NOT NULL,
-    labeled_at TEXT NOT NULL,
-    event_id INTEGER NOT NULL REFERENCES events(id),
-    PRIMARY KEY (edge_id, annotator));
-CREATE TABLE models (
-    version INTEGER PRIMARY KEY, path TEXT NOT NULL, created_at TEXT NOT NULL,
-    metrics TEXT NOT NULL, labels_seen INTEGER NOT NULL, seconds REAL NOT NULL,
-    promoted INTEGER NOT NULL DEFAULT 0);
-CREATE TABLE predictions (
-    edge_id TEXT NOT NULL REFERENCES edges(edge_id), model TEXT NOT NULL, p REAL NOT NULL,
-    PRIMARY KEY (edge_id, model));
-CREATE INDEX events_edge ON events (edge_id, annotator);
-"""
-
-
-def now() -> str:
-    """UTC time as ISO 8601 with microseconds: sorts as text, and distinct clicks stay distinct."""
-    return datetime.now(timezone.utc).isoformat(timespec="microseconds")
-
-
-@dataclass(frozen=True)
-class LabelRecord:
-    """One annotator's current label of one edge."""
-
-    edge_id: str
-    annotator: str
-    label: str
-    note: str
-    labeled_at: str
-
-
-@dataclass(frozen=True)
-class Predictions:
-    """The active model's p(success) per edge, and the threshold it decides at."""
-
-    model: str | None
-    threshold: float
-    p: dict[str, float]
-
-
-@dataclass(frozen=True)
-class Event:
-    """One appended history row: what an annotator did, and the state it left."""
-
-    id: int
-    edge_id: str
-    annotator: str
-    action: str
-    label: str | None
-    note: str
-    made_at: str
-    undoes: int | None
+__all__ = ["DB_NAME", "HUMAN_LABELS", "Event", "LabelRecord", "LabelStore", "Predictions", "now"]
 
 
 class LabelStore:
@@ -117,6 +42,10 @@ class LabelStore:
         durable: Flush every commit to disk (``synchronous=FULL``). The trainer, which
             writes no labels, opens its store without it: its frequent status writes then
             cost no disk flush that the app's label commits would queue behind.
+
+    Attributes:
+        versions: The workspace's model versions.
+        trainer: The background trainer's state, requests and held-out split.
 
     Raises:
         InputError: The folder holds a database made by another version, or not by us.
@@ -131,98 +60,17 @@ class LabelStore:
             raise InputError(self.workspace, f"no workspace here (no {DB_NAME})")
         try:
             self.workspace.mkdir(parents=True, exist_ok=True)
-            fresh = not self.path.exists()
-            self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
-            self._db.execute("PRAGMA journal_mode=WAL")
-            # FULL: a label acknowledged on screen survives a power cut, not only a kill.
-            self._db.execute(f"PRAGMA synchronous={'FULL' if durable else 'NORMAL'}")
-            self._db.execute("PRAGMA foreign_keys=ON")
-            self._db.execute("PRAGMA busy_timeout=5000")
-        except sqlite3.OperationalError as exc:  # read-only, immutable, locked: not damage
-            raise InputError(self.path, f"cannot open the label store ({exc}){_HINT}") from None
-        except sqlite3.DatabaseError as exc:
-            raise InputError(self.path, f"not a VGM Studio workspace ({exc})") from None
-        except (OSError, sqlite3.Error) as exc:
-            raise InputError(self.path, f"cannot open the label store ({exc}){_HINT}") from None
-        self._lock = threading.RLock()
-        self._depth = 0
-        if fresh:
-            try:
-                self._create()
-            except sqlite3.OperationalError as exc:
-                raise InputError(self.path, f"cannot make the label store ({exc}){_HINT}") from None
-        self._check_version()
-        check_workspace(self._db, self.path, _TABLES)
-        if create:  # the commands that may make a store are those that write to it
-            check_writable(self._db, self.path)
-
-    def _create(self) -> None:
-        with self.transaction() as db:
-            for statement in _TABLES.split(";"):
-                if statement.strip():
-                    db.execute(statement)
-            db.executemany(
-                "INSERT INTO meta VALUES (?, ?)",
-                [
-                    ("format", FORMAT),
-                    ("schema", str(SCHEMA)),
-                    ("created_by", f"vgm-studio {__version__}"),
-                    ("created_at", now()),
-                ],
-            )
-
-    def _check_version(self) -> None:
-        try:
-            meta = dict(self._db.execute("SELECT key, value FROM meta").fetchall())
-        except sqlite3.DatabaseError as exc:
-            raise InputError(self.path, f"not a VGM Studio workspace ({exc})") from None
-        if meta.get("format") != FORMAT:
-            raise InputError(self.path, "not a VGM Studio workspace (no format mark)")
-        if meta.get("schema") != str(SCHEMA):
-            raise InputError(
-                self.path,
-                f"workspace made by {meta.get('created_by', 'another version')} with schema "
-                f"{meta.get('schema')}; this vgm-studio {__version__} reads schema {SCHEMA}",
-            )
+        except OSError as exc:
+            raise InputError(self.path, f"cannot open the label store ({exc})") from None
+        self._db = Database(self.path, durable, writable=create)
+        self.versions = ModelVersions(self._db, self.workspace)
+        self.trainer = TrainerTables(self._db)
 
     def close(self) -> None:
-        with self._lock:
-            self._db.close()
-
-    def transaction(self) -> AbstractContextManager[sqlite3.Connection]:
-        """One committed transaction; rolled back whole if anything inside raises."""
-        return self._begin("IMMEDIATE")
-
-    def snapshot(self) -> AbstractContextManager[sqlite3.Connection]:
-        """One consistent read-only view of the store.
-
-        Unlike ``transaction`` it takes no write lock, so in WAL mode it never waits for
-        another process's writer (the trainer storing a version): what polls the store
-        from the app must not hold up a label behind someone else's commit.
-        """
-        return self._begin("DEFERRED")
-
-    @contextmanager
-    def _begin(self, mode: str) -> Iterator[sqlite3.Connection]:
-        with self._lock:
-            if self._depth:  # nested: part of the caller's transaction
-                yield self._db
-                return
-            self._db.execute(f"BEGIN {mode}")
-            self._depth += 1
-            try:
-                yield self._db
-            except BaseException:
-                self._db.execute("ROLLBACK")
-                raise
-            else:
-                self._db.execute("COMMIT")
-            finally:
-                self._depth -= 1
+        self._db.close()
 
     def _query(self, sql: str, args: Iterable[Any] = ()) -> list[Any]:
-        with self._lock:
-            return self._db.execute(sql, tuple(args)).fetchall()
+        return self._db.query(sql, args)
 
     # -- sources and edges -------------------------------------------------------------
 
@@ -239,7 +87,7 @@ class LabelStore:
         Returns:
             How many edges were new.
         """
-        with self.transaction() as db:
+        with self._db.transaction() as db:
             start = db.execute("SELECT COALESCE(MAX(position), -1) + 1 FROM edges").fetchone()[0]
             added = 0
             for edge in edges:
@@ -284,11 +132,11 @@ class LabelStore:
         """Records one annotator's label of one edge, committed before this returns."""
         if label not in HUMAN_LABELS:
             raise ValueError(f"label must be one of {HUMAN_LABELS}, not {label!r}")
-        return self._append(edge_id, annotator, "label", label, note, now())
+        return self._append(edge_id, annotator, "label", label, note)
 
     def skip(self, edge_id: str, annotator: str) -> Event:
         """Records that an annotator passed over an edge; the edge's labels do not change."""
-        with self.transaction() as db:
+        with self._db.transaction() as db:
             made_at = now()
             cur = db.execute(
                 "INSERT INTO events (edge_id, annotator, action, made_at) VALUES (?, ?, 'skip', ?)",
@@ -305,12 +153,12 @@ class LabelStore:
         action: str,
         label: str | None,
         note: str,
-        made_at: str,
         undoes: int | None = None,
         labeled_at: str | None = None,
         restores: int | None = None,
     ) -> Event:
-        with self.transaction() as db:
+        made_at = now()
+        with self._db.transaction() as db:
             prev = db.execute(
                 "SELECT label, note, labeled_at, event_id FROM labels "
                 "WHERE edge_id = ? AND annotator = ?",
@@ -345,7 +193,7 @@ class LabelStore:
             ValueError: The event is not a label, was undone already, or was overtaken by a
                 later label of the same annotator on the same edge.
         """
-        with self.transaction() as db:
+        with self._db.transaction() as db:
             row = db.execute(
                 "SELECT edge_id, annotator, action, prev_label, prev_note, prev_labeled_at, "
                 "prev_event FROM events WHERE id = ?",
@@ -369,7 +217,6 @@ class LabelStore:
                 "undo",
                 prev_label,
                 prev_note or "",
-                now(),
                 undoes=event_id,
                 labeled_at=prev_at,
                 restores=prev_event,
@@ -381,7 +228,7 @@ class LabelStore:
         Returns:
             Whether the store changed.
         """
-        with self.transaction() as db:
+        with self._db.transaction() as db:
             row = db.execute(
                 "SELECT label, note, labeled_at FROM labels WHERE edge_id = ? AND annotator = ?",
                 (record.edge_id, record.annotator),
@@ -395,10 +242,21 @@ class LabelStore:
                 "import",
                 record.label,
                 record.note,
-                now(),
                 labeled_at=record.labeled_at,
             )
             return True
+
+    def import_all(self, edges: Iterable[Edge], records: Iterable[LabelRecord]) -> tuple[int, int]:
+        """Adds an export's edges and labels in one transaction: all of them or, if anything
+        fails on the way, none.
+
+        Returns:
+            (edges added, labels added or updated).
+        """
+        with self._db.transaction():
+            added = self.add_edges(edges)
+            changed = sum(self.import_label(r) for r in records)
+        return added, changed
 
     def labels(self, edge_id: str | None = None) -> list[LabelRecord]:
         """Current labels, all or one edge's, in edge then annotator order."""
@@ -447,16 +305,8 @@ class LabelStore:
             probabilities: edge_id → p(success).
             threshold: p(success) at or above which the model says success.
         """
-        with self.transaction() as db:
-            db.execute("DELETE FROM predictions WHERE model = ?", (model,))
-            db.executemany(
-                "INSERT INTO predictions VALUES (?, ?, ?)",
-                [(k, model, float(v)) for k, v in probabilities.items()],
-            )
-            db.execute("INSERT OR REPLACE INTO meta VALUES ('active_model', ?)", (model,))
-            db.execute(
-                "INSERT OR REPLACE INTO meta VALUES ('active_threshold', ?)", (str(threshold),)
-            )
+        with self._db.transaction() as db:
+            set_predictions(db, model, probabilities, threshold)
 
     def predictions(self) -> Predictions:
         """The active model's predictions (empty when there is none)."""
@@ -472,3 +322,8 @@ class LabelStore:
         return Predictions(
             model, float(meta.get("active_threshold", DEFAULT_THRESHOLD)), dict(rows)
         )
+
+
+def _implements(store: LabelStore) -> LabelRepository:
+    """Never called: mypy checks here that the SQLite store implements the interface."""
+    return store

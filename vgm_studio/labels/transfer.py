@@ -194,7 +194,4 @@ def import_labels(store: LabelStore, path: Path) -> tuple[int, int]:
     if not records:
         raise InputError(path, "holds no labels")
     check_viewable(rows, path)
-    with store.transaction():
-        added = store.add_edges(edge for _, edge in rows)
-        changed = sum(store.import_label(r) for r in records)
-    return added, changed
+    return store.import_all((edge for _, edge in rows), records)

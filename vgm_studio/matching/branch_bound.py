@@ -139,7 +139,8 @@ def _scores(
     shift: NDArray[np.signedinteger] = (x * w.stride + y).astype(w.base.dtype)
     idx = w.base[a]
     idx += shift[:, None]
-    return np.take(w.levels[h], idx).sum(axis=1, dtype=np.int64)
+    total: NDArray[np.int64] = np.take(w.levels[h], idx).sum(axis=1, dtype=np.int64)
+    return total
 
 
 def _children(

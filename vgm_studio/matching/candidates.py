@@ -98,7 +98,8 @@ def loop_pairs(
     pairs = pairs[(b - a >= config.min_gap) & (dtheta <= math.radians(config.max_angle_deg))]
     pairs = pairs[_sample(len(pairs), config)]
     order = np.lexsort((pairs[:, 1], pairs[:, 0]))
-    return pairs[order]
+    ordered: NDArray[np.int64] = pairs[order]
+    return ordered
 
 
 def _sample(count: int, config: CandidateConfig) -> NDArray[np.int64]:
@@ -113,7 +114,8 @@ def _noise(config: CandidateConfig, count: int) -> NDArray[np.float64]:
     # A stream of its own, so the noise of an edge does not depend on how pairs were sampled.
     rng = np.random.default_rng([config.seed, 1])
     sd = np.array([config.noise_xy, config.noise_xy, math.radians(config.noise_theta_deg)])
-    return rng.normal(size=(count, 3)) * sd
+    noise: NDArray[np.float64] = rng.normal(size=(count, 3)) * sd
+    return noise
 
 
 def plan_pairs(
@@ -218,31 +220,43 @@ def make_candidates(
     }
     # Absolute, so the edges file still finds its log when read from another folder.
     log_path = str(Path(log.path).resolve())
-    edges = []
-    for p in tqdm(pairs, desc="matching", unit="edge", disable=None if progress else True):
-        result = matcher.match(log.scans[p.a], log.scans[p.b], p.guess)
-        estimate = [float(v) for v in result.estimate]
-        label: Literal["success", "failure", "ambiguous"] | None = None
-        if p.reference is not None:
-            label = reference_label(p.reference, estimate, thresholds)
-        edges.append(
-            Edge(
-                edge_id=edge_id(
-                    log.content_hash, p.a, p.b, estimate, "" if mount is None else mount.id_text()
-                ),
-                log_path=log_path,
-                log_sha256=log.content_hash,
-                a=p.a,
-                b=p.b,
-                timestamp_a=log.scans[p.a].timestamp,
-                timestamp_b=log.scans[p.b].timestamp,
-                kind=p.kind,
-                guess=[float(v) for v in p.guess],
-                estimate=estimate,
-                match=result.figures(),
-                reference=None if p.reference is None else [float(v) for v in p.reference],
-                label=label,
-                params=recorded,
-            )
-        )
-    return edges
+    return [
+        _matched(log, log_path, p, matcher, thresholds, recorded)
+        for p in tqdm(pairs, desc="matching", unit="edge", disable=None if progress else True)
+    ]
+
+
+def _matched(
+    log: ScanLog,
+    log_path: str,
+    pair: _Pair,
+    matcher: ScanMatcher,
+    thresholds: LabelThresholds,
+    recorded: dict[str, Any],
+) -> Edge:
+    """One planned pair matched, and labelled against its reference when it has one."""
+    p = pair
+    result = matcher.match(log.scans[p.a], log.scans[p.b], p.guess)
+    estimate = [float(v) for v in result.estimate]
+    label: Literal["success", "failure", "ambiguous"] | None = None
+    if p.reference is not None:
+        label = reference_label(p.reference, estimate, thresholds)
+    return Edge(
+        # A scan pair matched under another laser mount is another edge.
+        edge_id=edge_id(
+            log.content_hash, p.a, p.b, estimate, "" if log.mount is None else log.mount.id_text()
+        ),
+        log_path=log_path,
+        log_sha256=log.content_hash,
+        a=p.a,
+        b=p.b,
+        timestamp_a=log.scans[p.a].timestamp,
+        timestamp_b=log.scans[p.b].timestamp,
+        kind=p.kind,
+        guess=[float(v) for v in p.guess],
+        estimate=estimate,
+        match=result.figures(),
+        reference=None if p.reference is None else [float(v) for v in p.reference],
+        label=label,
+        params=recorded,
+    )

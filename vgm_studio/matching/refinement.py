@@ -129,9 +129,7 @@ def refine(
         if found.sum() < 3:
             break
         r, n, moved = r[found], n[found], moved[found]
-        # Parameters are (x, y, θ) themselves: d(moved)/dθ is (moved − t) turned by 90°.
-        rel = moved - pose[:2]
-        jac = np.column_stack([n[:, 0], n[:, 1], n[:, 1] * rel[:, 0] - n[:, 0] * rel[:, 1]])
+        jac = _jacobian(n, moved - pose[:2])
         w = np.minimum(1.0, inlier_distance / np.maximum(np.abs(r), 1e-12))
         h = jac.T @ (jac * w[:, None])
         g = jac.T @ (w * r)
@@ -143,16 +141,33 @@ def refine(
         if np.linalg.norm(delta) < tolerance:
             converged = True
             break
+    return _judged(target, source, pose, max_distance, inlier_distance, it, converged)
 
+
+def _jacobian(n: NDArray[np.float64], rel: NDArray[np.float64]) -> NDArray[np.float64]:
+    """d(residual)/d(x, y, θ) of point-to-line residuals with normals ``n``, at points ``rel``
+    from the pose's origin: the parameters are (x, y, θ) themselves, so d(moved)/dθ is
+    (moved − t) turned by 90°."""
+    return np.column_stack([n[:, 0], n[:, 1], n[:, 1] * rel[:, 0] - n[:, 0] * rel[:, 1]])
+
+
+def _judged(
+    target: Target,
+    source: NDArray[np.float64],
+    pose: NDArray[np.float64],
+    max_distance: float,
+    inlier_distance: float,
+    iterations: int,
+    converged: bool,
+) -> Refinement:
+    """The refined pose with its inliers, residual and covariance."""
     r, n, moved, found = _residuals(target, source, pose, max_distance)
     inliers = found & (np.abs(r) < inlier_distance)
     count = int(inliers.sum())
     residual = float(np.sqrt(np.mean(r[inliers] ** 2))) if count else float("inf")
     covariance = None
     if count > 3:
-        rel = moved[inliers] - pose[:2]
-        nn = n[inliers]
-        jac = np.column_stack([nn[:, 0], nn[:, 1], nn[:, 1] * rel[:, 0] - nn[:, 0] * rel[:, 1]])
+        jac = _jacobian(n[inliers], moved[inliers] - pose[:2])
         sigma2 = float(np.sum(r[inliers] ** 2)) / (count - 3)
         try:
             covariance = np.asarray(sigma2 * np.linalg.inv(jac.T @ jac), dtype=np.float64)
@@ -160,7 +175,7 @@ def refine(
             covariance = None
     return Refinement(
         estimate=pose,
-        iterations=it,
+        iterations=iterations,
         converged=converged,
         inlier_ratio=count / max(len(source), 1),
         residual=residual,

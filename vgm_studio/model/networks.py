@@ -48,7 +48,8 @@ class _PooledHead(nn.Module):
         parts = [x.mean(dim=(2, 3)), x.amax(dim=(2, 3))]
         if extra is not None:
             parts.append(extra)
-        return self.mlp(torch.cat(parts, dim=1)).squeeze(1)
+        logit: torch.Tensor = self.mlp(torch.cat(parts, dim=1)).squeeze(1)
+        return logit
 
 
 @dataclass(frozen=True)
@@ -75,7 +76,8 @@ class VGMNetPaper(nn.Module):
         self.head = _PooledHead(width, c.hidden, c.dropout)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.head(self.features(x))
+        logit: torch.Tensor = self.head(self.features(x))
+        return logit
 
 
 @dataclass(frozen=True)
@@ -132,7 +134,8 @@ class VGMNet(nn.Module):
             else:
                 x = x.pow(self.lift)
             x = self.fold(x)
-        return self.head(self.features(x), extra)
+        logit: torch.Tensor = self.head(self.features(x), extra)
+        return logit
 
     def forward_cells(
         self,
@@ -163,7 +166,8 @@ class VGMNet(nn.Module):
         pre = shift.expand(batch * side * side, -1).clone()
         pre.index_add_(0, index, value[:, None] * weight[channel])
         x = torch.relu(pre).view(batch, side, side, -1).permute(0, 3, 1, 2)
-        return self.head(self.features[3:](x), extra)
+        out: torch.Tensor = self.head(self.features[3:](x), extra)
+        return out
 
     def _stem_affine(self) -> tuple[torch.Tensor, torch.Tensor]:
         """The stem's 1×1 convolution and batch norm as (C_in, C_out) weights and a shift."""
@@ -217,4 +221,5 @@ class RGBNet(nn.Module):
         self.head = _PooledHead(width, c.hidden, c.dropout)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.head(self.features(x))
+        logit: torch.Tensor = self.head(self.features(x))
+        return logit

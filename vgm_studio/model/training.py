@@ -1,14 +1,12 @@
 """Training: labelled edges → a validated checkpoint.
 
 Ambiguous and unlabelled edges are left out. Train and validation are split per (log, label)
-so both sets see every log and both classes; training draws classes equally often, turns each
-pair by a random rigid rotation, and stops when the validation loss stops improving.
+so both sets see every log and both classes; networks are trained by ``fitting.fit_network``
+(the loop the background trainer shares), the score model in closed form.
 """
 
 from __future__ import annotations
 
-import copy
-import math
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
@@ -19,28 +17,28 @@ from typing import Any
 import numpy as np
 import torch
 from numpy.typing import NDArray
-from torch import nn
-from tqdm import tqdm
 
-from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.core.hashing import content_hash
 from vgm_studio.errors import InputError
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge, read_edges
 from vgm_studio.model.checkpoint import Checkpoint, save_checkpoint
 from vgm_studio.model.features import PairSample, figures_matrix, load_samples
-from vgm_studio.model.metrics import binary_metrics
-from vgm_studio.model.operating import precision_curve
+from vgm_studio.model.fitting import Recipe, Rows, choose_threshold, fit_network, judge
+from vgm_studio.model.operating import PrecisionCurve, precision_curve
 from vgm_studio.model.registry import build_network, entry
 from vgm_studio.model.score import ScoreModel
-from vgm_studio.model.validator import (
-    InputSpec,
-    batched_logits,
-    forward,
-    input_spec,
-    pick_device,
-)
+from vgm_studio.model.validator import input_spec, pick_device
 from vgm_studio.vgm.grid import VGMParams
+
+__all__ = [
+    "LabelledSet",
+    "TrainConfig",
+    "choose_threshold",
+    "read_labelled",
+    "stratified_split",
+    "train",
+]
 
 
 @dataclass(frozen=True)
@@ -48,7 +46,7 @@ class TrainConfig:
     """How to train.
 
     Attributes:
-        model: ``vgmnet``, ``vgmnet-paper``, ``rgb-baseline`` or ``score``.
+        model: A name in the model registry (``model/registry.py``).
         epochs: Epochs at most.
         batch_size: Pairs per step.
         lr: Adam learning rate.
@@ -81,6 +79,19 @@ class TrainConfig:
     threads: int | None = None
     vgm: VGMParams = field(default_factory=VGMParams)
     hyper: dict[str, Any] = field(default_factory=dict)
+
+    def recipe(self) -> Recipe:
+        """The training loop's part of the config."""
+        return Recipe(
+            epochs=self.epochs,
+            epoch_size=self.epoch_size,
+            batch_size=self.batch_size,
+            lr=self.lr,
+            weight_decay=self.weight_decay,
+            patience=self.patience,
+            augment=self.augment,
+            seed=self.seed,
+        )
 
 
 @dataclass
@@ -158,58 +169,22 @@ def _subset(
     return idx[keep]
 
 
-def choose_threshold(labels: NDArray[np.bool_], probs: NDArray[np.float64]) -> float:
-    """The p(success) cut with the best validation accuracy.
-
-    Training draws both classes equally often, so its p = 0.5 is the cut for a 50/50 world;
-    the validation split keeps the logs' own class mix, so the cut is chosen there. Ties go
-    to the cut nearest 0.5.
-    """
-    cuts = np.round(np.arange(0.02, 0.99, 0.01), 2)
-    acc = np.array([np.mean((probs >= c) == labels) for c in cuts])
-    best = np.flatnonzero(acc >= acc.max() - 1e-12)
-    return float(cuts[best[np.argmin(np.abs(cuts[best] - 0.5))]])
-
-
-def balanced_draws(
-    labels: NDArray[np.bool_], count: int, rng: np.random.Generator
-) -> NDArray[np.int64]:
-    """``count`` row indices drawn with replacement, each class half of the time."""
-    pos = max(int(labels.sum()), 1)
-    neg = max(int((~labels).sum()), 1)
-    weights = np.where(labels, 0.5 / pos, 0.5 / neg)
-    return rng.choice(len(labels), size=count, replace=True, p=weights / weights.sum())
-
-
-def balanced_bce(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """BCE in which both classes weigh the same, whatever their counts."""
-    pos = target.sum().clamp(min=1)
-    neg = (1 - target).sum().clamp(min=1)
-    w = torch.where(target > 0.5, 0.5 / pos, 0.5 / neg)
-    return (
-        nn.functional.binary_cross_entropy_with_logits(logits, target, reduction="none") * w
-    ).sum()
-
-
-def train_step(
-    net: nn.Module,
-    spec: InputSpec,
-    samples: Sequence[PairSample],
-    labels: NDArray[np.bool_],
-    rotations: NDArray[np.float64] | None,
-    optimiser: torch.optim.Optimizer,
-    schedule: torch.optim.lr_scheduler.LRScheduler,
-    device: torch.device,
-) -> float:
-    """One optimiser step on a batch (each pair turned by ``rotations``); returns its loss."""
-    x, extra = spec.tensors(samples, device, rotations)
-    y = torch.from_numpy(labels.astype(np.float32)).to(device)
-    loss = nn.functional.binary_cross_entropy_with_logits(forward(net, x, extra), y)
-    optimiser.zero_grad(set_to_none=True)
-    loss.backward()
-    optimiser.step()
-    schedule.step()
-    return float(loss.detach())
+def _split(
+    data: LabelledSet, config: TrainConfig
+) -> tuple[NDArray[np.int64], NDArray[np.int64], dict[str, dict[str, int]]]:
+    """Rows to train and validate on, and how many of each class each holds."""
+    train_idx, val_idx = stratified_split(
+        data.labels, data.groups, config.val_fraction, config.seed
+    )
+    if config.max_train is not None:
+        train_idx = _subset(train_idx, data.labels, data.groups, config.max_train, config.seed)
+    if len(set(data.labels[train_idx])) < 2:
+        raise InputError(None, "training needs both success and failure edges")
+    counts = {
+        name: {"success": int(data.labels[idx].sum()), "failure": int((~data.labels[idx]).sum())}
+        for name, idx in (("train", train_idx), ("validation", val_idx))
+    }
+    return train_idx, val_idx, counts
 
 
 def train(
@@ -229,51 +204,17 @@ def train(
     torch.manual_seed(config.seed)
     if config.threads:
         torch.set_num_threads(config.threads)
-    train_idx, val_idx = stratified_split(
-        data.labels, data.groups, config.val_fraction, config.seed
-    )
-    if config.max_train is not None:
-        train_idx = _subset(train_idx, data.labels, data.groups, config.max_train, config.seed)
-    if len(set(data.labels[train_idx])) < 2:
-        raise InputError(None, "training needs both success and failure edges")
-    counts = {
-        name: {"success": int(data.labels[idx].sum()), "failure": int((~data.labels[idx]).sum())}
-        for name, idx in (("train", train_idx), ("validation", val_idx))
-    }
+    train_idx, val_idx, counts = _split(data, config)
     log(
         f"training {config.model} on {counts['train']['success']} success + "
         f"{counts['train']['failure']} failure edges; validating on "
         f"{counts['validation']['success']} + {counts['validation']['failure']}"
     )
-    val_samples = [data.samples[i] for i in val_idx]
-    val_labels = data.labels[val_idx]
-    checkpoint = Checkpoint(model=config.model, vgm=config.vgm)
+    rows = Rows(data.samples, data.labels, train_idx, val_idx)
     if model.holds == "score":
-        spread = bool(config.hyper.get("spread", False))
-        x = figures_matrix([data.samples[i] for i in train_idx], spread)
-        score = ScoreModel.fit(x, data.labels[train_idx])
-        probs = score.predict(figures_matrix(val_samples, spread))
-        checkpoint.hyper = {"spread": spread} if spread else {}
-        checkpoint.score = asdict(score)
+        checkpoint = _fit_score(rows, config)
     else:
-        device = pick_device(config.device)
-        net, hyper = build_network(config.model, config.hyper)
-        net = net.to(device).to(memory_format=torch.channels_last)  # type: ignore[call-overload]
-        spec = input_spec(config.model, hyper, config.vgm)
-        state, history = _fit(
-            net, spec, data, train_idx, val_samples, val_labels, config, device, progress, log
-        )
-        net.load_state_dict(state)
-        probs = 1.0 / (1.0 + np.exp(-batched_logits(net, spec, val_samples, device, 128)))
-        checkpoint.hyper = hyper
-        checkpoint.device = str(device)
-        checkpoint.history = history
-        checkpoint.state_dict = {k: v.detach().cpu() for k, v in state.items()}
-    threshold = choose_threshold(val_labels, probs) if len(val_idx) else DEFAULT_THRESHOLD
-    checkpoint.threshold = threshold
-    checkpoint.metrics = binary_metrics(val_labels, probs, threshold) if len(val_idx) else {}
-    # The whole validation curve, so a cut can later be chosen by precision (--loop-precision).
-    checkpoint.curve = precision_curve(val_labels, probs) if len(val_idx) else None
+        checkpoint = _fit_network(rows, config, progress, log)
     checkpoint.training = {
         "files": data.files,
         "counts": counts,
@@ -284,70 +225,48 @@ def train(
     return checkpoint
 
 
-def _fit(
-    net: nn.Module,
-    spec: InputSpec,
-    data: LabelledSet,
-    train_idx: NDArray[np.int64],
-    val_samples: list[PairSample],
-    val_labels: NDArray[np.bool_],
-    config: TrainConfig,
-    device: torch.device,
-    progress: bool,
-    log: Callable[[str], None],
-) -> tuple[dict[str, torch.Tensor], list[dict[str, float]]]:
-    rng = np.random.default_rng(config.seed)
-    optimiser = torch.optim.Adam(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-    per_epoch = config.epoch_size or len(train_idx)
-    steps = math.ceil(per_epoch / config.batch_size)
-    schedule = torch.optim.lr_scheduler.OneCycleLR(
-        optimiser, config.lr, total_steps=config.epochs * steps
+def _fit_score(rows: Rows, config: TrainConfig) -> Checkpoint:
+    """The score model, fitted in closed form and judged on the validation rows."""
+    spread = bool(config.hyper.get("spread", False))
+    score = ScoreModel.fit(
+        figures_matrix([rows.samples[i] for i in rows.train], spread), rows.labels[rows.train]
     )
-    train_labels = data.labels[train_idx]
-    val_target = torch.from_numpy(val_labels.astype(np.float32))
-    best_loss, best_state, stale = math.inf, copy.deepcopy(net.state_dict()), 0
-    history = []
-    for epoch in range(1, config.epochs + 1):
-        t0 = time.perf_counter()
-        net.train()
-        draws = train_idx[balanced_draws(train_labels, per_epoch, rng)]
-        bar = tqdm(
-            range(steps),
-            desc=f"epoch {epoch}/{config.epochs}",
-            unit="batch",
-            disable=None if progress else True,
-            leave=False,
-        )
-        total = 0.0
-        for step in bar:
-            idx = draws[step * config.batch_size : (step + 1) * config.batch_size]
-            rot = rng.uniform(0, 2 * np.pi, len(idx)) if config.augment else None
-            batch = [data.samples[i] for i in idx]
-            total += train_step(
-                net, spec, batch, data.labels[idx], rot, optimiser, schedule, device
-            )
-            bar.set_postfix(loss=f"{total / (step + 1):.3f}")
-        logits = torch.from_numpy(batched_logits(net, spec, val_samples, device, 128))
-        val_loss = float(balanced_bce(logits, val_target))
-        acc = float(((logits > 0).numpy() == val_labels).mean()) if len(val_labels) else math.nan
-        history.append(
-            {
-                "epoch": epoch,
-                "train_loss": total / steps,
-                "val_loss": val_loss,
-                "val_accuracy": acc,
-                "seconds": time.perf_counter() - t0,
-            }
-        )
-        log(
-            f"epoch {epoch:2d}: train loss {total / steps:.3f}  val loss {val_loss:.3f}  "
-            f"val accuracy {acc:.3f}  ({time.perf_counter() - t0:.0f} s)"
-        )
-        if val_loss < best_loss - 1e-4:
-            best_loss, best_state, stale = val_loss, copy.deepcopy(net.state_dict()), 0
-        else:
-            stale += 1
-            if stale >= config.patience:
-                log(f"stopping: no better validation loss for {config.patience} epochs")
-                break
-    return best_state, history
+    probs = score.predict(figures_matrix([rows.samples[i] for i in rows.val], spread))
+    threshold, metrics = judge(rows.labels[rows.val], probs)
+    return Checkpoint(
+        model=config.model,
+        vgm=config.vgm,
+        hyper={"spread": spread} if spread else {},
+        threshold=threshold,
+        metrics=metrics,
+        score=asdict(score),
+        curve=_curve(rows, probs),
+    )
+
+
+def _fit_network(
+    rows: Rows, config: TrainConfig, progress: bool, log: Callable[[str], None]
+) -> Checkpoint:
+    """A network, trained by the shared loop from fresh weights."""
+    device = pick_device(config.device)
+    net, hyper = build_network(config.model, config.hyper)
+    net = net.to(device).to(memory_format=torch.channels_last)  # type: ignore[call-overload]
+    spec = input_spec(config.model, hyper, config.vgm)
+    fitted = fit_network(net, spec, rows, config.recipe(), device, log=log, progress=progress)
+    return Checkpoint(
+        model=config.model,
+        vgm=config.vgm,
+        hyper=hyper,
+        threshold=fitted.threshold,
+        metrics=fitted.metrics,
+        state_dict=fitted.state_dict,
+        history=fitted.history,
+        device=str(device),
+        curve=_curve(rows, fitted.val_p),
+    )
+
+
+def _curve(rows: Rows, probs: NDArray[np.float64]) -> PrecisionCurve | None:
+    """The whole validation curve, so a cut can later be chosen by precision
+    (``--loop-precision``)."""
+    return precision_curve(rows.labels[rows.val], probs) if len(rows.val) else None

@@ -105,7 +105,8 @@ def input_spec(model: str, hyper: dict[str, Any], vgm: VGMParams) -> InputSpec:
 
 def forward(net: nn.Module, x: torch.Tensor, extra: torch.Tensor | None) -> torch.Tensor:
     """One forward pass; networks built without matcher figures take the image alone."""
-    return net(x, extra) if extra is not None else net(x)
+    logits: torch.Tensor = net(x, extra) if extra is not None else net(x)
+    return logits
 
 
 # Pairs per network pass on the sparse path: the stem's output for 64 pairs (20 MB) is

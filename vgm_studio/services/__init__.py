@@ -6,6 +6,7 @@ callback (progress, results) and a ``warn`` one (what went amiss but did not sto
 """
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 Say = Callable[[str], None]
 
@@ -15,4 +16,12 @@ def quiet(_line: str) -> None:
     return None
 
 
-__all__ = ["Say", "quiet"]
+@dataclass(frozen=True)
+class Voice:
+    """Who hears a service: ``say`` its results and progress, ``warn`` what went amiss."""
+
+    say: Say = quiet
+    warn: Say = quiet
+
+
+__all__ = ["Say", "Voice", "quiet"]

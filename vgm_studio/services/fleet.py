@@ -238,7 +238,7 @@ def ray_session(options: RayOptions) -> Iterator[tuple[Any, int]]:
             where = options.address or "a local Ray"
             raise InputError(None, f"cannot start or reach {where}: {exc}") from None
     try:
-        yield ray, int(ray.cluster_resources().get("CPU", 1))
+        yield ray, int(ray.cluster_resources().get("CPU", 1))  # type: ignore[no-untyped-call]
     finally:
         if started:
             ray.shutdown()

@@ -62,7 +62,7 @@ class FleetSettings:
 
     def key_doc(self) -> dict[str, Any]:
         """The settings as JSON, the model by its content rather than its path."""
-        doc = json.loads(json.dumps(asdict(self), default=str))
+        doc: dict[str, Any] = json.loads(json.dumps(asdict(self), default=str))
         doc["slam"]["validation"]["model"] = content_hash(self.model)
         return doc
 

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from vgm_studio.errors import InputError
-from vgm_studio.labels.store import LabelStore
+from vgm_studio.labels.opening import open_store
 from vgm_studio.model.checkpoint import Checkpoint, load_checkpoint
 from vgm_studio.model.metrics import binary_metrics
 from vgm_studio.model.training import TrainConfig, read_labelled, train
@@ -110,7 +110,7 @@ def _figure(metrics: dict[str, Any], key: str) -> str:
 def models_table(records: list[ModelRecord]) -> str:
     """The versions as a Markdown-like table: held-out figures, labels, time, promotion."""
     header = ["version", "created (UTC)", "labels", "held out", "accuracy", "F1", "AUC", "cut"]
-    header += ["seconds", "status"]
+    header += ["seconds", "status", "why"]
     rows = []
     for m in records:
         held = m.metrics.get("counts", {}).get("held_out", {})
@@ -124,6 +124,7 @@ def models_table(records: list[ModelRecord]) -> str:
                 *(_figure(m.metrics, k) for k in ("accuracy", "f1", "auc", "threshold")),
                 f"{m.seconds:.0f}",
                 status,
+                str(m.metrics.get("compared", {}).get("reason", "")),
             ]
         )
     widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
@@ -134,19 +135,19 @@ def models_table(records: list[ModelRecord]) -> str:
     return "\n".join(lines)
 
 
-def list_versions(workspace: Path) -> str:
-    """A workspace's versions as a table, or a line saying there are none yet."""
-    store = LabelStore(workspace, create=False)
+def list_versions(workspace: Path, url: str | None = None) -> str:
+    """A workspace's (or team store's) versions as a table, or a line saying there are none."""
+    store = open_store(workspace, url, create=False)
     try:
         records = list_models(store)
     finally:
         store.close()
     if not records:
-        return f"{workspace}: no model versions yet (run vgm-studio trainer)"
+        return f"{url or workspace}: no model versions yet (run vgm-studio trainer)"
     return models_table(records)
 
 
-def export_version(workspace: Path, version: int, out: Path) -> str:
+def export_version(workspace: Path, version: int, out: Path, url: str | None = None) -> str:
     """Writes version ``vN`` out as a checkpoint file.
 
     Raises:
@@ -154,7 +155,7 @@ def export_version(workspace: Path, version: int, out: Path) -> str:
     """
     if out.suffix != ".pt":
         raise InputError(out, "the checkpoint must end in .pt")
-    store = LabelStore(workspace, create=False)
+    store = open_store(workspace, url, create=False)
     try:
         records = list_models(store)
     finally:

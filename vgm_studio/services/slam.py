@@ -17,7 +17,7 @@ from vgm_studio.maps.png import write_maps
 from vgm_studio.matching.agreement import check_agreement, disagreement_warning, motions_of
 from vgm_studio.model.registry import BUNDLED_MODEL, VALIDATOR_MODELS
 from vgm_studio.recording import write_recording
-from vgm_studio.services import Say, quiet
+from vgm_studio.services import Say, Voice
 from vgm_studio.slam.config import SlamConfig
 from vgm_studio.slam.pipeline import SlamResult, run_slam
 from vgm_studio.slam.report import (
@@ -75,8 +75,7 @@ def run_slam_command(
     relations: Path | None = None,
     join: JoinOptions | None = None,
     outputs: SlamOutputs | None = None,
-    say: Say = quiet,
-    warn: Say = quiet,
+    voice: Voice | None = None,
 ) -> None:
     """Reads the log, runs SLAM, scores it against relations and writes what ``outputs`` asks.
 
@@ -88,12 +87,14 @@ def run_slam_command(
     """
     start = time.perf_counter()
     outputs = outputs or SlamOutputs()
+    voice = voice or Voice()
+    say = voice.say
     # A log named as its own reference already holds its reference poses.
     if reference is not None and reference.resolve() == log.resolve():
         reference = None
     source = read_slam_source(log, read, reference, relations, join)
     for line in source.warnings:
-        warn(line)
+        voice.warn(line)
     source.log = with_own_reference(source.log)
     if source.relations is None:
         source.relations = relations_from_reference(source.log)
@@ -102,7 +103,7 @@ def run_slam_command(
     result = run_slam(source.log, config)
     say(edge_line(result))
     for line in _what_is_missing(source.log, result):
-        warn(line)
+        voice.warn(line)
     errors = errors_of(result, source.relations) if source.relations is not None else None
     if errors is not None:
         say(table(errors))

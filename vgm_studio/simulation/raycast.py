@@ -27,7 +27,8 @@ def _segment_distances(
 ) -> NDArray[np.float64]:
     a, e = walls[:, :2] - origin, walls[:, 2:] - walls[:, :2]
     u = np.clip(-np.sum(a * e, axis=1) / np.maximum(np.sum(e * e, axis=1), 1e-300), 0.0, 1.0)
-    return np.hypot(*(a + u[:, None] * e).T)
+    distance: NDArray[np.float64] = np.hypot(*(a + u[:, None] * e).T)
+    return distance
 
 
 def cast(
@@ -79,4 +80,5 @@ def cast(
         # sensor does not blind it.
         t[~((disc >= 0.0) & (t > 0.0))] = np.inf
         best = np.minimum(best, t.min(axis=1))
-    return np.minimum(best, max_range)
+    ranges: NDArray[np.float64] = np.minimum(best, max_range)
+    return ranges

@@ -242,9 +242,10 @@ def _inside(
 ) -> NDArray[np.bool_]:
     """Whether each probe point lies strictly inside any rectangle."""
     x, y = px[:, None], py[:, None]
-    return np.any(
+    inside: NDArray[np.bool_] = np.any(
         (rects[:, 0] < x) & (x < rects[:, 2]) & (rects[:, 1] < y) & (y < rects[:, 3]), axis=1
     )
+    return inside
 
 
 def union_walls(rects: Sequence[Rect] | ArrayLike) -> NDArray[np.float64]:
@@ -294,4 +295,5 @@ def segment_distances(points: ArrayLike, walls: NDArray[np.float64]) -> NDArray[
     length2 = np.maximum(np.sum(e * e, axis=1), 1e-300)
     u = np.clip(np.sum(rel * e[None], axis=2) / length2, 0.0, 1.0)
     gap = rel - u[..., None] * e[None]
-    return np.sqrt(np.min(np.sum(gap * gap, axis=2), axis=1))
+    distance: NDArray[np.float64] = np.sqrt(np.min(np.sum(gap * gap, axis=2), axis=1))
+    return distance

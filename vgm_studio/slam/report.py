@@ -151,7 +151,8 @@ def summary(
             "edges": [edge_json(e) for e in result.edges],
         }
     )
-    return _finite(out)
+    finite: dict[str, Any] = _finite(out)
+    return finite
 
 
 def edge_json(edge: SlamEdge) -> dict[str, Any]:

@@ -32,6 +32,7 @@ from vgm_studio.studio.panel import (
 from vgm_studio.studio.queues import Queue, Snapshot, order
 from vgm_studio.studio.scene import TabScene
 from vgm_studio.studio.tab import Tab
+from vgm_studio.studio.team import StoreLink
 from vgm_studio.studio.view import EdgeView, ViewCache
 
 # Where commands have always imported them from.
@@ -76,6 +77,8 @@ class Studio:
         # "Train now" in the panel; None when no trainer runs beside the studio.
         self._train_now_callback = train_now
         self._trainer_text = ""
+        self._store_text: str | None = None
+        self._link = StoreLink(store, self.show_store_status)
 
     @property
     def url(self) -> str:
@@ -142,8 +145,17 @@ class Studio:
         if text == self._trainer_text:
             return
         self._trainer_text = text
+        if self._store_text:  # a lost label store is the more urgent line
+            return
         for tab in list(self._tabs.values()):
             tab.panel.trainer.content = text
+
+    def show_store_status(self, line: str | None) -> None:
+        """Says in every tab that the label store is unreachable (None: it is back)."""
+        self._store_text = line
+        text = f"**{plain(line)}**; labels already acknowledged are stored" if line else None
+        for tab in list(self._tabs.values()):
+            tab.panel.trainer.content = text or self._trainer_text
 
     def _train_now(self, tab: Tab) -> None:
         if self._train_now_callback is None:
@@ -202,6 +214,7 @@ class Studio:
             self._tabs.pop(client.client_id, None)
             for edge_id in [e for e, c in self._claims.items() if c == client.client_id]:
                 del self._claims[edge_id]
+        self._link.release(client.client_id)
 
     def _edge(self, edge_id: str) -> Edge:
         edge = self._edges.get(edge_id)
@@ -301,10 +314,12 @@ class Studio:
                 n = len(tab.order)
                 start = tab.index + 1
                 candidates = [(start + k) % n for k in range(n)] if n else []
+                self._link.release(tab.client.client_id)
                 for i in candidates:
                     e = tab.order[i]
                     held = self._claims.get(e)
-                    if not labels.get(e) and held in (None, tab.client.client_id):
+                    free = not labels.get(e) and held in (None, tab.client.client_id)
+                    if free and self._link.claim(e, tab.client.client_id):
                         tab.index = i
                         break
                 else:

@@ -52,7 +52,10 @@ def _max_pool(channel: NDArray[np.float32], k: int) -> NDArray[np.float32]:
     h, w = channel.shape
     padded = np.zeros((math.ceil(h / k) * k, math.ceil(w / k) * k), dtype=np.float32)
     padded[:h, :w] = channel
-    return padded.reshape(padded.shape[0] // k, k, padded.shape[1] // k, k).max(axis=(1, 3))
+    blocks: NDArray[np.float32] = padded.reshape(
+        padded.shape[0] // k, k, padded.shape[1] // k, k
+    ).max(axis=(1, 3))
+    return blocks
 
 
 def _tile(channel: NDArray[np.float32], title: str) -> NDArray[np.uint8]:

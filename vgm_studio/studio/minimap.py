@@ -67,7 +67,9 @@ def _drawn(source: str, poses: NDArray[np.float64]) -> Trajectory:
     return traj
 
 
-def _mark(img: NDArray[np.uint8], traj: Trajectory, pose: NDArray[np.float64], rgb: tuple) -> None:
+def _mark(
+    img: NDArray[np.uint8], traj: Trajectory, pose: NDArray[np.float64], rgb: tuple[int, int, int]
+) -> None:
     u, v = traj.pixel(pose[0], pose[1])
     tip = (round(u + 12 * np.cos(pose[2])), round(v - 12 * np.sin(pose[2])))
     cv2.line(img, (u, v), tip, rgb, 2, cv2.LINE_AA)

@@ -178,16 +178,25 @@ def trainer_text(status: TrainerStatus) -> str:
     state: str = status.state
     if state == "training" and status.epochs:
         state = f"training, epoch {status.epoch} of {status.epochs}"
-    active = f"v{status.active_version}" if status.active_version is not None else "none yet"
+    if status.active_version is not None:
+        active = f"v{status.active_version}"
+    elif status.active_model is not None:  # a model not trained here, the bundled one say
+        active = status.active_model.split(":")[0]
+    else:
+        active = "none yet"
     m = status.metrics
     figures = ""
     if m.get("accuracy") is not None:
         figures = " · held-out acc {:.2f}, F1 {:.2f}".format(m["accuracy"], m.get("f1") or 0.0)
     pending = " · Train now asked" if status.pending_request else ""
-    return (
+    text = (
         f"**Trainer:** {state}{pending}  \nmodel {active}{figures} · "
         f"{status.labels_since} labels since"
     )
+    # The trainer's last words: why it waits, or why its last version was not promoted.
+    if status.state != "training" and status.message and status.message != "watching the labels":
+        text += f"  \n{status.message}"
+    return text
 
 
 def position_text(index: int, total: int, labelled: int, edges: int, queue: Queue) -> str:

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from vgm_studio.errors import InputError
+from vgm_studio.labels.opening import store_url
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.studio.app import Studio, StudioConfig
 from vgm_studio.studio.gate import is_loopback
@@ -41,9 +42,12 @@ class TrainerOptions:
 
     retrain_every: int = 25
     base: list[Path] = field(default_factory=list)
+    min_held_out: int = 20
 
     @classmethod
-    def checked(cls, retrain_every: int, base: list[Path] | None) -> TrainerOptions:
+    def checked(
+        cls, retrain_every: int, base: list[Path] | None, min_held_out: int = 20
+    ) -> TrainerOptions:
         """Checks the base files now: one missing would crash the trainer over and over.
 
         Raises:
@@ -52,7 +56,7 @@ class TrainerOptions:
         for path in base or []:
             if not path.is_file():
                 raise InputError(path, "no such --base edges file")
-        return cls(retrain_every, [p.resolve() for p in base or []])
+        return cls(retrain_every, [p.resolve() for p in base or []], min_held_out)
 
 
 def _say(line: str) -> None:
@@ -69,7 +73,13 @@ def _start_trainer(studio: Studio, options: TrainerOptions) -> Callable[[], None
     Returns:
         A function that stops both.
     """
-    supervisor = TrainerSupervisor(studio.store.workspace, options.retrain_every, options.base)
+    supervisor = TrainerSupervisor(
+        studio.store.workspace,
+        options.retrain_every,
+        options.base,
+        extra_args=["--min-held-out", str(options.min_held_out)],
+        url=store_url(studio.store),
+    )
     watcher = PromotionWatcher(
         studio.store,
         on_promote=lambda _name: studio.refresh_predictions(),

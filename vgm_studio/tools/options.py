@@ -154,6 +154,43 @@ TimeToleranceOpt = Annotated[
 MaxLoopsOpt = Annotated[int, typer.Option("--max", help="Loop candidates at most.", min=1)]
 SeedOpt = Annotated[int, typer.Option(help="Random seed.", min=0)]
 WorkspaceOpt = Annotated[Path, typer.Option(metavar="DIR", help="Workspace folder (label store).")]
+StoreOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--store",
+        metavar="URL",
+        help="A team label store, postgresql://USER@HOST[:PORT]/DB, in place of --workspace.",
+    ),
+]
+ModelsDirOpt = Annotated[
+    Path | None,
+    typer.Option(
+        metavar="DIR", help="With --store: the folder for model files.", show_default="DB.models"
+    ),
+]
+
+
+def store_location(
+    workspace: Path | None, store: str | None, models_dir: Path | None, default: Path | None = None
+) -> tuple[Path, str | None]:
+    """(workspace folder or models folder, team store URL or None) from the store options.
+
+    Raises:
+        InputError: Both --workspace and --store, neither (without a default), or --models-dir
+            without --store.
+    """
+    if workspace is not None and store is not None:
+        raise InputError(None, "--workspace and --store exclude each other: give one")
+    if store is not None:
+        name = store.rstrip("/").rsplit("/", 1)[-1] or "vgm"
+        return models_dir or Path(f"{name}.models"), store
+    if models_dir is not None:
+        raise InputError(None, "--models-dir goes with --store (a workspace keeps its models/)")
+    if workspace is None and default is None:
+        raise InputError(None, "give --workspace DIR or --store URL")
+    return workspace or default or Path(), None
+
+
 DeviceOpt = Annotated[Device, typer.Option(help="auto takes a GPU when there is one.")]
 PortOpt = Annotated[int, typer.Option(help="TCP port.", min=1, max=65535)]
 HostOpt = Annotated[
@@ -187,6 +224,12 @@ NoTrainerOpt = Annotated[
 ]
 RetrainOpt = Annotated[
     int, typer.Option(help="The trainer trains after this many new labels.", min=1)
+]
+MinHeldOutOpt = Annotated[
+    int,
+    typer.Option(
+        min=1, help="Held-out labels of each class a version needs before it is promoted."
+    ),
 ]
 
 

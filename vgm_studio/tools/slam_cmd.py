@@ -147,6 +147,7 @@ def slam(
     from vgm_studio.datasets.source import JoinOptions
     from vgm_studio.graph.config import GraphConfig
     from vgm_studio.maps.config import MapConfig
+    from vgm_studio.services import Voice
     from vgm_studio.services.slam import SlamOutputs, run_slam_command, validator_model
     from vgm_studio.slam.config import (
         ConsistencyConfig,
@@ -188,6 +189,5 @@ def slam(
         relations=relations,
         join=JoinOptions(time_tolerance, time_offset),
         outputs=SlamOutputs(json_out, map_png, record, spawn),
-        say=typer.echo,
-        warn=lambda line: typer.echo(line, err=True),
+        voice=Voice(typer.echo, lambda line: typer.echo(line, err=True)),
     )

@@ -11,22 +11,32 @@ from typing import Annotated
 import typer
 
 from vgm_studio.datasets import ReadOptions
+from vgm_studio.datasets.source import JoinOptions
 from vgm_studio.errors import InputError
 from vgm_studio.tools.options import (
     AnnotatorOpt,
     HostOpt,
     MaxLoopsOpt,
+    MinHeldOutOpt,
+    ModelsDirOpt,
     NoTrainerOpt,
     PortOpt,
     RetrainOpt,
+    StoreOpt,
     TimeToleranceOpt,
     TokenOpt,
     WorkspaceOpt,
     number,
+    store_location,
     with_read_options,
 )
 
-DemoWorkspaceOpt = Annotated[Path, typer.Option(metavar="DIR", help="Workspace folder.")]
+DemoWorkspaceOpt = Annotated[
+    Path | None, typer.Option(metavar="DIR", help="Workspace folder.", show_default="vgm-demo")
+]
+WorkspaceOrStoreOpt = Annotated[
+    Path | None, typer.Option(metavar="DIR", help="Workspace folder (or --store URL).")
+]
 LoopPrecisionOpt = Annotated[
     float,
     typer.Option(
@@ -58,6 +68,8 @@ def label(
             metavar="DIR", help="Workspace folder (label store).", show_default="SOURCE-name.studio"
         ),
     ] = None,
+    store: StoreOpt = None,
+    models_dir: ModelsDirOpt = None,
     port: PortOpt = 8080,
     host: HostOpt = "127.0.0.1",
     token: TokenOpt = None,
@@ -76,6 +88,7 @@ def label(
     loop_precision: LoopPrecisionOpt = 0.0,
     no_trainer: NoTrainerOpt = False,
     retrain_every: RetrainOpt = 25,
+    min_held_out: MinHeldOutOpt = 20,
     base: Annotated[
         list[Path] | None,
         typer.Option("--base", metavar="EDGES.jsonl", help="Labelled edges the trainer also uses."),
@@ -87,35 +100,35 @@ def label(
     time_tolerance: TimeToleranceOpt = 0.05,
 ) -> None:
     """Serve a log's candidate edges (or an edges file) in the browser for labeling."""
-    from vgm_studio.labels.store import LabelStore
+    from vgm_studio.labels.opening import open_store
     from vgm_studio.studio.app import StudioConfig, check_port_free, default_annotator
     from vgm_studio.studio.serve import TrainerOptions, added_text, serve
     from vgm_studio.workspace import choose_model, fill_workspace
 
     start = time.perf_counter()
+    folder, url = store_location(workspace, store, models_dir, Path(f"{source.stem}.studio"))
     check_host(host)
     check_port_free(host, port)
-    store = LabelStore(workspace or Path(f"{source.stem}.studio"))
-    before = store.count_edges()
+    opened = open_store(folder, url)
+    before = opened.count_edges()
     added = fill_workspace(
-        store,
+        opened,
         source,
         reference,
         read,
         max_loops,
-        time_offset,
-        time_tolerance=time_tolerance,
+        JoinOptions(time_tolerance=time_tolerance, time_offset=time_offset),
         say=typer.echo,
         warn=_warn,
     )
     if before:  # an existing workspace: say what this source changed in it
-        typer.echo(added_text(store, source, before, added))
+        typer.echo(added_text(opened, source, before, added))
     serve(
-        store,
+        opened,
         StudioConfig(host=host, port=port, annotator=annotator or default_annotator(), token=token),
         model=choose_model(model, no_model, precision=loop_precision or None, warn=_warn),
         precision=loop_precision or None,
-        trainer=None if no_trainer else TrainerOptions.checked(retrain_every, base),
+        trainer=None if no_trainer else TrainerOptions.checked(retrain_every, base, min_held_out),
         ready_seconds=time.perf_counter() - start,
     )
 
@@ -143,7 +156,9 @@ def check_host(host: str) -> None:
 
 
 def demo(
-    workspace: DemoWorkspaceOpt = Path("vgm-demo"),
+    workspace: DemoWorkspaceOpt = None,
+    store: StoreOpt = None,
+    models_dir: ModelsDirOpt = None,
     port: PortOpt = 8080,
     host: HostOpt = "127.0.0.1",
     token: TokenOpt = None,
@@ -161,20 +176,22 @@ def demo(
     from vgm_studio.workspace import open_demo
 
     start = time.perf_counter()
+    folder, url = store_location(workspace, store, models_dir, Path("vgm-demo"))
     if serve_app:
         check_host(host)
         check_port_free(host, port)
     precision = loop_precision or None
-    store, model = open_demo(
-        workspace, predict=not serve_app, precision=precision, say=typer.echo, warn=_warn
+    opened, model = open_demo(
+        folder, url, predict=not serve_app, precision=precision, say=typer.echo, warn=_warn
     )
     if not serve_app:
         seconds = time.perf_counter() - start
-        typer.echo(f"workspace {workspace} ready: {store.count_edges()} edges ({seconds:.1f} s)")
-        store.close()
+        where = url or f"workspace {folder}"
+        typer.echo(f"{where} ready: {opened.count_edges()} edges ({seconds:.1f} s)")
+        opened.close()
         return
     serve(
-        store,
+        opened,
         StudioConfig(host=host, port=port, annotator=annotator or default_annotator(), token=token),
         model=model,
         precision=precision,
@@ -184,28 +201,32 @@ def demo(
 
 
 def export(
-    workspace: Annotated[Path, typer.Option(metavar="DIR", help="Workspace folder.")],
     out: Annotated[Path, typer.Option(metavar="FILE", help="Labels file: .jsonl or .csv.")],
+    workspace: WorkspaceOrStoreOpt = None,
+    store: StoreOpt = None,
 ) -> None:
-    """Write a workspace's labels as JSONL (a training file) or CSV."""
-    from vgm_studio.labels.store import LabelStore
+    """Write a workspace's (or team store's) labels as JSONL (a training file) or CSV."""
+    from vgm_studio.labels.opening import open_store
     from vgm_studio.labels.transfer import export_labels
 
-    count = export_labels(LabelStore(workspace, create=False), out)
+    folder, url = store_location(workspace, store, None)
+    count = export_labels(open_store(folder, url, create=False), out)
     typer.echo(f"wrote {count} labels to {out}")
 
 
 def import_(
     files: Annotated[list[Path], typer.Argument(metavar="FILE...", help="Exported label files.")],
-    workspace: Annotated[Path, typer.Option(metavar="DIR", help="Workspace folder.")],
+    workspace: WorkspaceOrStoreOpt = None,
+    store: StoreOpt = None,
 ) -> None:
-    """Add exported labels (.jsonl or .csv) to a workspace; the newer label wins."""
-    from vgm_studio.labels.store import LabelStore
+    """Add exported labels (.jsonl or .csv) to a workspace or team store; the newer label wins."""
+    from vgm_studio.labels.opening import open_store
     from vgm_studio.labels.transfer import import_labels
 
-    store = LabelStore(workspace)
+    folder, url = store_location(workspace, store, None)
+    opened = open_store(folder, url)
     for path in files:
-        edges, labels = import_labels(store, path)
+        edges, labels = import_labels(opened, path)
         typer.echo(f"{path}: {labels} labels added or updated, {edges} new edges")
 
 

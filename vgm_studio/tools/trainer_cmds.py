@@ -8,11 +8,17 @@ from typing import Annotated
 import typer
 
 from vgm_studio.errors import InputError
-from vgm_studio.tools.options import WorkspaceOpt
+from vgm_studio.tools.options import MinHeldOutOpt, ModelsDirOpt, StoreOpt, store_location
+
+WorkspaceOrStoreOpt = Annotated[
+    Path | None, typer.Option(metavar="DIR", help="Workspace folder (or --store URL).")
+]
 
 
 def trainer(
-    workspace: WorkspaceOpt,
+    workspace: WorkspaceOrStoreOpt = None,
+    store: StoreOpt = None,
+    models_dir: ModelsDirOpt = None,
     retrain_every: Annotated[
         int, typer.Option(min=1, help="Train after this many new labels.")
     ] = 25,
@@ -25,10 +31,12 @@ def trainer(
     ] = False,
     epochs: Annotated[int, typer.Option(min=1, help="Epochs at most per version.")] = 12,
     epoch_size: Annotated[int, typer.Option(min=1, help="Class-balanced draws per epoch.")] = 1024,
+    min_held_out: MinHeldOutOpt = 20,
 ) -> None:
     """Train model versions from a workspace's labels as they come in (runs until Ctrl-C)."""
     from vgm_studio.trainer.fit import FitConfig
     from vgm_studio.trainer.process import run_trainer
+    from vgm_studio.trainer.promotion import PromotionRule
     from vgm_studio.trainer.worker import TrainerConfig
 
     config = TrainerConfig(
@@ -36,12 +44,16 @@ def trainer(
         base=tuple(base or ()),
         from_scratch=from_scratch,
         fit=FitConfig(epochs=epochs, epoch_size=epoch_size),
+        promotion=PromotionRule(min_per_class=min_held_out),
     )
-    run_trainer(workspace, config)
+    folder, url = store_location(workspace, store, models_dir)
+    run_trainer(folder, config, url=url)
 
 
 def models(
-    workspace: WorkspaceOpt,
+    workspace: WorkspaceOrStoreOpt = None,
+    store: StoreOpt = None,
+    models_dir: ModelsDirOpt = None,
     export: Annotated[
         int | None, typer.Option(metavar="N", min=1, help="Write version vN out as a checkpoint.")
     ] = None,
@@ -52,9 +64,10 @@ def models(
     """List a workspace's model versions and their held-out figures, or export one."""
     from vgm_studio.services.models import export_version, list_versions
 
+    folder, url = store_location(workspace, store, models_dir)
     if export is None and out is None:
-        typer.echo(list_versions(workspace))
+        typer.echo(list_versions(folder, url))
     elif export is not None and out is not None:
-        typer.echo(export_version(workspace, export, out))
+        typer.echo(export_version(folder, export, out, url))
     else:
         raise InputError(None, "--export N and --out FILE.pt go together")

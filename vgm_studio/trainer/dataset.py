@@ -22,8 +22,7 @@ from vgm_studio.labels.votes import human_label
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
 from vgm_studio.model.features import PairSample, load_samples
-from vgm_studio.model.training import read_labelled
-from vgm_studio.trainer.registry import ensure_tables
+from vgm_studio.model.training import read_labelled, stratified_split
 
 
 def majority_labels(store: LabelStore) -> dict[str, bool]:
@@ -60,9 +59,8 @@ def held_out_split(
     Returns:
         The held-out edge ids (a subset of ``labels``).
     """
-    ensure_tables(store)
-    with store.transaction() as db:
-        known = dict(db.execute("SELECT edge_id, held_out FROM trainer_split").fetchall())
+
+    def deal(known: dict[str, int]) -> list[tuple[str, int]]:
         strata: dict[tuple[str, bool], list[str]] = {}
         for edge_id, y in labels.items():
             strata.setdefault((groups.get(edge_id, ""), y), []).append(edge_id)
@@ -77,8 +75,9 @@ def held_out_split(
                 flag = int(held < target)
                 held += flag
                 new.append((edge_id, flag))
-        db.executemany("INSERT INTO trainer_split VALUES (?, ?)", new)
-    known.update(new)
+        return new
+
+    known = store.trainer.deal_split(deal)
     return {e for e in labels if known[e] == 1}
 
 
@@ -143,18 +142,31 @@ class SampleCache:
 
 @dataclass
 class BaseSet:
-    """Labelled edges from ``--base`` files: always trained on, never held out."""
+    """Labelled edges from ``--base`` files: trained on, but for a guard set kept apart.
+
+    The guard set (a share of every (log, label), fixed by the seed) is never trained on: a
+    new version must not lose accuracy there against the model in use (``promotion.py``).
+    """
 
     edge_ids: list[str]
     samples: list[PairSample]
     labels: NDArray[np.bool_]
+    guard_samples: list[PairSample] = field(default_factory=list)
+    guard_labels: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     @classmethod
-    def read(cls, paths: Sequence[Path]) -> BaseSet:
+    def read(cls, paths: Sequence[Path], guard_fraction: float = 0.0, seed: int = 0) -> BaseSet:
         if not paths:
             return cls([], [], np.zeros(0, dtype=bool))
         data = read_labelled(list(paths), progress=False)
-        return cls([e.edge_id for e in data.edges], data.samples, data.labels)
+        train, guard = stratified_split(data.labels, data.groups, guard_fraction, seed)
+        return cls(
+            [data.edges[i].edge_id for i in train],
+            [data.samples[i] for i in train],
+            data.labels[train],
+            [data.samples[i] for i in guard],
+            data.labels[guard],
+        )
 
 
 def training_set(

@@ -1,19 +1,17 @@
-"""One training run of the background trainer: ``model/training.py``'s recipe, resumable.
+"""One training run of the background trainer: the shared loop (``model/fitting.py``), resumable.
 
-The recipe is the offline trainer's (class-balanced draws, random rigid rotations, Adam with a
+The loop is ``vgm-studio train``'s (class-balanced draws, random rigid rotations, Adam with a
 one-cycle schedule, early stopping on the held-out balanced loss, the p(success) cut chosen on
-the held-out edges), with what a background trainer needs besides: it starts from a previous
-version's weights, reports each epoch, and can be told to stop between batches.
+the held-out edges); what the background trainer adds is its own recipe (small batches, an
+epoch of 1024 draws), a warm start from a previous version's weights, the CPU, and a hook
+told of each epoch that can stop the run.
 """
 
 from __future__ import annotations
 
-import copy
-import math
 import os
 import tempfile
-import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,18 +20,11 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 
-from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.model.checkpoint import Checkpoint
 from vgm_studio.model.features import PairSample
-from vgm_studio.model.metrics import binary_metrics
+from vgm_studio.model.fitting import EpochHook, Recipe, Rows, fit_network
 from vgm_studio.model.registry import MODELS, build_network
-from vgm_studio.model.training import (
-    balanced_bce,
-    balanced_draws,
-    choose_threshold,
-    train_step,
-)
-from vgm_studio.model.validator import batched_logits, input_spec
+from vgm_studio.model.validator import input_spec
 from vgm_studio.vgm.grid import VGMParams
 
 # The model the background trainer trains: the registry's one that it can.
@@ -70,6 +61,19 @@ class FitConfig:
     hyper: dict[str, Any] = field(default_factory=lambda: {"figures": True, "spread": True})
     vgm: VGMParams = field(default_factory=VGMParams)
 
+    def recipe(self) -> Recipe:
+        """The shared training loop's part of the config."""
+        return Recipe(
+            epochs=self.epochs,
+            epoch_size=self.epoch_size,
+            batch_size=self.batch_size,
+            lr=self.lr,
+            weight_decay=self.weight_decay,
+            patience=self.patience,
+            augment=self.augment,
+            seed=self.seed,
+        )
+
 
 @dataclass
 class FitResult:
@@ -84,9 +88,6 @@ class FitResult:
     warm_start: bool
 
 
-EpochHook = Callable[[int, int], None]
-
-
 def fit(
     samples: Sequence[PairSample],
     labels: NDArray[np.bool_],
@@ -96,7 +97,7 @@ def fit(
     init: Checkpoint | None = None,
     on_epoch: EpochHook | None = None,
 ) -> FitResult:
-    """Trains ``vgmnet`` on ``train_idx`` and judges it on ``held_idx``.
+    """Trains the background model on ``train_idx`` and judges it on ``held_idx``.
 
     Args:
         samples: Every row's sample.
@@ -120,60 +121,15 @@ def fit(
         net.load_state_dict(init.state_dict)
     net = net.to(memory_format=torch.channels_last)  # type: ignore[call-overload]
     spec = input_spec(MODEL, hyper, config.vgm)
-    rng = np.random.default_rng(config.seed)
-    optimiser = torch.optim.Adam(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-    steps = math.ceil(config.epoch_size / config.batch_size)
-    schedule = torch.optim.lr_scheduler.OneCycleLR(
-        optimiser, config.lr, total_steps=config.epochs * steps
-    )
-    held_samples = [samples[i] for i in held_idx]
-    held_labels = labels[held_idx]
-    held_target = torch.from_numpy(held_labels.astype(np.float32))
-    best_loss, best_state, stale = math.inf, copy.deepcopy(net.state_dict()), 0
-    history: list[dict[str, float]] = []
-    if on_epoch:
-        on_epoch(0, config.epochs)
-    for epoch in range(1, config.epochs + 1):
-        t0 = time.perf_counter()
-        net.train()
-        draws = train_idx[balanced_draws(labels[train_idx], config.epoch_size, rng)]
-        total = 0.0
-        for step in range(steps):
-            idx = draws[step * config.batch_size : (step + 1) * config.batch_size]
-            rot = rng.uniform(0, 2 * np.pi, len(idx)) if config.augment else None
-            batch = [samples[i] for i in idx]
-            total += train_step(net, spec, batch, labels[idx], rot, optimiser, schedule, device)
-        record = {"epoch": epoch, "train_loss": total / steps, "seconds": 0.0}
-        if len(held_idx):
-            logits = torch.from_numpy(batched_logits(net, spec, held_samples, device, 128))
-            val_loss = float(balanced_bce(logits, held_target))
-            record["val_loss"] = val_loss
-        else:  # nothing held out yet: the last epoch is the best we know
-            val_loss = -float(epoch)
-        record["seconds"] = time.perf_counter() - t0
-        history.append(record)
-        if val_loss < best_loss - 1e-4:
-            best_loss, best_state, stale = val_loss, copy.deepcopy(net.state_dict()), 0
-        else:
-            stale += 1
-        if on_epoch:
-            on_epoch(epoch, config.epochs)
-        if stale >= config.patience:
-            break
-    net.load_state_dict(best_state)
-    if len(held_idx):
-        p = 1.0 / (1.0 + np.exp(-batched_logits(net, spec, held_samples, device, 128)))
-        threshold = choose_threshold(held_labels, p)
-        metrics = binary_metrics(held_labels, p, threshold)
-    else:
-        p, threshold, metrics = np.zeros(0), DEFAULT_THRESHOLD, {}
+    rows = Rows(samples, labels, train_idx, held_idx)
+    fitted = fit_network(net, spec, rows, config.recipe(), device, on_epoch=on_epoch)
     return FitResult(
-        state_dict={k: v.detach().cpu() for k, v in best_state.items()},
+        state_dict=fitted.state_dict,
         hyper=hyper,
-        threshold=threshold,
-        metrics=metrics,
-        held_out_p=p,
-        history=history,
+        threshold=fitted.threshold,
+        metrics=fitted.metrics,
+        held_out_p=fitted.val_p,
+        history=fitted.history,
         warm_start=warm,
     )
 

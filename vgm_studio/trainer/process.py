@@ -15,6 +15,7 @@ from typing import Any
 
 from vgm_studio.errors import InputError, exit_on_error
 from vgm_studio.trainer.fit import FitConfig
+from vgm_studio.trainer.promotion import PromotionRule
 from vgm_studio.trainer.worker import Stop, TrainerConfig, Worker
 
 PROG = "vgm-studio trainer"
@@ -29,6 +30,7 @@ def run_trainer(
     config: TrainerConfig,
     parent_pid: int | None = None,
     say: Callable[[str], None] = _to_stderr,
+    url: str | None = None,
 ) -> None:
     """Trains versions from a workspace's labels as they come in, until stopped.
 
@@ -40,9 +42,9 @@ def run_trainer(
     for path in config.base:
         if not path.is_file():
             raise InputError(path, "no such edges file")
-    worker = Worker(workspace, config, parent_pid=parent_pid, log=say)
+    worker = Worker(workspace, config, parent_pid=parent_pid, log=say, url=url)
     say(
-        f"trainer: watching {workspace} (a version every {config.retrain_every} labels; "
+        f"trainer: watching {url or workspace} (a version every {config.retrain_every} labels; "
         "Ctrl-C stops)"
     )
     _stop_on_sigterm()
@@ -65,11 +67,13 @@ def _parser() -> argparse.ArgumentParser:
     fit = FitConfig()
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
     parser.add_argument("--workspace", type=Path, required=True)
+    parser.add_argument("--store", default=None)  # a team store; --workspace holds its models
     parser.add_argument("--retrain-every", type=int, default=TrainerConfig.retrain_every)
     parser.add_argument("--base", type=Path, action="append", default=[])
     parser.add_argument("--from-scratch", action="store_true")
     parser.add_argument("--epochs", type=int, default=fit.epochs)
     parser.add_argument("--epoch-size", type=int, default=fit.epoch_size)
+    parser.add_argument("--min-held-out", type=int, default=PromotionRule.min_per_class)
     parser.add_argument("--parent-pid", type=int, default=None)
     return parser
 
@@ -82,5 +86,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         base=tuple(args.base),
         from_scratch=args.from_scratch,
         fit=FitConfig(epochs=args.epochs, epoch_size=args.epoch_size),
+        promotion=PromotionRule(min_per_class=args.min_held_out),
     )
-    exit_on_error(PROG, lambda: run_trainer(args.workspace, config, args.parent_pid))
+    exit_on_error(
+        PROG, lambda: run_trainer(args.workspace, config, args.parent_pid, url=args.store)
+    )

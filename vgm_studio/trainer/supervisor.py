@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from vgm_studio.labels.store import LabelStore
+from vgm_studio.labels.opening import open_store
 
 LOG_NAME = "trainer.log"
 
@@ -33,7 +33,7 @@ class Backoff:
     healthy: float = 60.0
 
     def pause(self, failures: int) -> float:
-        return min(self.first * 2 ** max(failures - 1, 0), self.longest)
+        return float(min(self.first * 2 ** max(failures - 1, 0), self.longest))
 
 
 class TrainerSupervisor:
@@ -62,8 +62,10 @@ class TrainerSupervisor:
         from_scratch: bool = False,
         extra_args: Sequence[str] = (),
         backoff: Backoff | None = None,
+        url: str | None = None,
     ) -> None:
         self.workspace = Path(workspace)
+        self.url = url
         self.backoff = backoff or Backoff()
         self.command = [
             sys.executable,
@@ -77,6 +79,7 @@ class TrainerSupervisor:
             str(os.getpid()),
             *[arg for path in base for arg in ("--base", str(path))],
             *(["--from-scratch"] if from_scratch else []),
+            *(["--store", url] if url else []),
             *extra_args,
         ]
         self.restarts = 0
@@ -138,6 +141,8 @@ class TrainerSupervisor:
     def _run_once(self) -> int | None:
         """Runs the trainer until it exits; returns its exit code (None: it never started)."""
         try:
+            # A team store's models folder may not exist before its first version.
+            self.log_path.parent.mkdir(parents=True, exist_ok=True)
             with self.log_path.open("ab") as log:
                 proc = subprocess.Popen(
                     self.command, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
@@ -156,7 +161,7 @@ class TrainerSupervisor:
         try:
             from vgm_studio.trainer.registry import read_state, report
 
-            store = LabelStore(self.workspace, create=False)
+            store = open_store(self.workspace, self.url, create=False)
             try:
                 last = read_state(store)
                 if last.get("state") == "crashed":  # the trainer said why: keep its words

@@ -49,9 +49,7 @@ class PromotionWatcher:
 
     def _active_model(self) -> str | None:
         try:
-            with self.store.snapshot() as db:
-                row = db.execute("SELECT value FROM meta WHERE key = 'active_model'").fetchone()
-            return row[0] if row else None
+            return self.store.trainer.view().active_model
         except Exception:  # the store is busy or closing: nothing new this time
             return self._model
 

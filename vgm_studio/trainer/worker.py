@@ -15,7 +15,7 @@ import fcntl
 import os
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -23,13 +23,16 @@ import numpy as np
 import torch
 
 from vgm_studio.errors import InputError
+from vgm_studio.labels.opening import open_store
+from vgm_studio.labels.records import NewVersion
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.model.checkpoint import Checkpoint, load_checkpoint
-from vgm_studio.model.metrics import binary_metrics
+from vgm_studio.model.registry import BUNDLED_MODEL
 from vgm_studio.model.validator import Validator
 from vgm_studio.trainer import registry
 from vgm_studio.trainer.dataset import BaseSet, SampleCache, TrainingSet, training_set
 from vgm_studio.trainer.fit import FitConfig, FitResult, fit, payload, write_checkpoint
+from vgm_studio.trainer.promotion import Contest, PromotionRule, Scored, verdict
 
 
 @dataclass(frozen=True)
@@ -47,6 +50,7 @@ class TrainerConfig:
         nice: Added to the process's niceness; when not 0 the process also runs under
             SCHED_IDLE (Linux), so the app and the browser always win a contested core.
         fit: The training recipe.
+        promotion: What a version must show before it replaces the model in use.
     """
 
     retrain_every: int = 25
@@ -58,6 +62,7 @@ class TrainerConfig:
     threads: int = 1
     nice: int = 10
     fit: FitConfig = field(default_factory=FitConfig)
+    promotion: PromotionRule = field(default_factory=PromotionRule)
 
 
 class Stop(Exception):
@@ -85,15 +90,17 @@ class Worker:
         config: TrainerConfig,
         parent_pid: int | None = None,
         log: Callable[[str], None] = print,
+        url: str | None = None,
     ) -> None:
         self.config = config
         self.log = log
         self.parent_pid = parent_pid
-        self.store = LabelStore(workspace, create=False, durable=False)
-        self._lock = _take_lock(self.store.workspace)
+        self.store = open_store(workspace, url, create=False, durable=False)
+        # A team store's lock lives in the database, so trainers on other hosts see it too.
+        self._lock = _take_lock(self.store.workspace) if url is None else _team_lock_of(self.store)
         self.cache = SampleCache(self.store)
-        self.base = BaseSet.read(config.base)
-        registry.ensure_tables(self.store)
+        self.base = BaseSet.read(config.base, config.held_out, config.fit.seed)
+        self._guard_cache: tuple[str, Scored | None] | None = None
         for path in registry.remove_orphans(self.store):
             log(f"removed {path.name}: a checkpoint never registered (a trainer was stopped)")
         # New labels are counted from what the last version read; a cycle killed part way is
@@ -129,10 +136,7 @@ class Worker:
 
     def _new_labels(self) -> tuple[int, int]:
         """(labels made since the last version's data was read, the newest event id)."""
-        with self.store.snapshot() as db:
-            newest = db.execute("SELECT COALESCE(MAX(id), 0) FROM events").fetchone()[0]
-            count = registry.labels_since(db, self.seen)
-        return count, int(newest)
+        return self.store.trainer.progress(self.seen)
 
     def due(self) -> Job | None:
         """The training to do now, if any: a request, or enough new labels."""
@@ -170,49 +174,59 @@ class Worker:
             init,
             on_epoch=self._on_epoch,
         )
-        verdict = self._compare(data, result)
-        promote = verdict["promote"]
-        predictions = self._predict_all(result) if promote else None
-        train_seconds = time.perf_counter() - start
+        version, judged = self._register(job, data, result, newest, start)
+        acc = result.metrics.get("accuracy", float("nan"))
+        kept = judged.get("against") or "no model"
+        what = "promoted" if judged["promote"] else f"not promoted, {kept} stays in use"
+        line = f"v{version}: held-out accuracy {acc:.3f} on {len(data.held_out)} edges; {what}"
+        if not judged["promote"]:
+            line += f": {judged['reason']}"
+        self.log(line)
+        registry.report(self.store, "idle", message=line)
+        return version
+
+    def _register(
+        self, job: Job, data: TrainingSet, result: FitResult, newest: int, start: float
+    ) -> tuple[int, dict[str, Any]]:
+        """Judges a trained version and registers it (promoted or not) with the requests it
+        serves and the watermark, in one transaction; returns N and the verdict."""
+        judged = self._compare(data, result)
+        predictions = self._predict_all(result) if judged["promote"] else None
+        counts = data.counts()
         metrics = {
             **result.metrics,
             "threshold": result.threshold,
-            "compared": verdict,
+            "compared": judged,
             "counts": counts,
             "base_edges": len(data.edge_ids) - data.workspace_labels,
             "warm_start": result.warm_start,
             "epochs_run": len(result.history),
         }
-        content = payload(
-            result,
-            self.config.fit,
-            {"counts": counts, "seconds": train_seconds, "workspace": str(self.store.workspace)},
+        training = {
+            "counts": counts,
+            "seconds": time.perf_counter() - start,
+            "workspace": str(self.store.workspace),
+        }
+        tmp = write_checkpoint(
+            self.store.workspace / registry.MODELS_DIR, payload(result, self.config.fit, training)
         )
-        tmp = write_checkpoint(self.store.workspace / registry.MODELS_DIR, content)
-        with self.store.transaction() as db:  # the version, its requests and watermark at once
-            version = registry.register_model(
-                self.store,
-                tmp,
-                metrics,
-                data.workspace_labels,
-                time.perf_counter() - start,
-                promote,
-                predictions,
-                result.threshold,
-                state={"events_seen": str(newest)},
-            )
-            registry.finish_requests(db, job.request)
+        new = NewVersion(
+            checkpoint=tmp,
+            metrics=metrics,
+            labels_seen=data.workspace_labels,
+            seconds=time.perf_counter() - start,
+            promote=bool(judged["promote"]),
+            predictions=predictions,
+            threshold=result.threshold,
+            state={"events_seen": str(newest)},
+            requests_served=job.request,
+        )
+        version = registry.register_model(self.store, new)
         self.seen = newest
-        acc = result.metrics.get("accuracy", float("nan"))
-        what = "promoted" if promote else f"kept v{verdict.get('against')} ({verdict['reason']})"
-        line = f"v{version}: held-out accuracy {acc:.3f} on {len(data.held_out)} edges; {what}"
-        self.log(line)
-        registry.report(self.store, "idle", message=line)
-        return version
+        return version, judged
 
     def _skip(self, job: Job, newest: int, why: str) -> None:
-        with self.store.transaction() as db:
-            registry.finish_requests(db, job.request)
+        self.store.trainer.finish(job.request)
         # Not written to the store: the labels still count towards the next version.
         self.seen = newest
         registry.report(self.store, "idle", message=why)
@@ -231,37 +245,63 @@ class Worker:
         return load_checkpoint(chosen.path)
 
     def _compare(self, data: TrainingSet, result: FitResult) -> dict[str, Any]:
-        """Promote unless the active model is more accurate on the same held-out edges.
+        """The promotion verdict (``promotion.py``): the version against the model in use.
 
-        The active model is judged by its stored predictions at its own cut; held-out edges
+        The model in use is judged by its stored predictions at its own cut; held-out edges
         were never trained on by any version, and the bundled model never saw this log.
         """
+        held = data.labels[data.held_out]
+        contest = Contest(new=Scored(held, result.held_out_p, result.threshold))
         active = self.store.predictions()
-        if active.model is None:
-            return {"promote": True, "reason": "no model in use"}
-        rows = [k for k, i in enumerate(data.held_out) if data.edge_ids[i] in active.p]
-        if not rows:
-            return {"promote": True, "reason": "the model in use has no held-out predictions"}
-        labels = data.labels[data.held_out][rows]
-        theirs = np.array([active.p[data.edge_ids[data.held_out[k]]] for k in rows])
-        old = binary_metrics(labels, theirs, active.threshold)["accuracy"]
-        new = binary_metrics(labels, result.held_out_p[rows], result.threshold)["accuracy"]
-        better = new >= old
-        return {
-            "promote": better,
-            "reason": "not worse" if better else "worse on the held-out edges",
-            "against": registry.version_of(active.model) or active.model,
-            "edges": len(rows),
-            "accuracy": new,
-            "active_accuracy": old,
-        }
+        if active.model is not None:
+            name = registry.version_of(active.model)
+            rows = [k for k, i in enumerate(data.held_out) if data.edge_ids[i] in active.p]
+            theirs = np.array([active.p[data.edge_ids[data.held_out[k]]] for k in rows])
+            contest = replace(
+                contest,
+                active_name=f"v{name}" if name is not None else active.model,
+                active=Scored(held[rows], theirs, active.threshold) if rows else None,
+            )
+        if len(self.base.guard_labels):
+            guard_p = self._validator(result).predict_samples(self.base.guard_samples, 128)
+            contest = replace(
+                contest,
+                guard_new=Scored(self.base.guard_labels, guard_p, result.threshold),
+                guard_active=self._guard_of(active.model),
+            )
+        return verdict(contest, self.config.promotion)
+
+    def _guard_of(self, model: str | None) -> Scored | None:
+        """The model in use on the guard set (None: no model in use, or its file is unknown)."""
+        if self._guard_cache is not None and self._guard_cache[0] == model:
+            return self._guard_cache[1]
+        path = _checkpoint_of(self.store.workspace, model)
+        scored = None
+        if path is not None and path.is_file():
+            validator = Validator.load(path, device="cpu")
+            p = validator.predict_samples(self.base.guard_samples, 128)
+            scored = Scored(self.base.guard_labels, p, validator.threshold)
+        self._guard_cache = (model or "", scored)
+        return scored
+
+    def _validator(self, result: FitResult) -> Validator:
+        return Validator(payload(result, self.config.fit, {}), device="cpu")
 
     def _predict_all(self, result: FitResult) -> dict[str, float]:
-        content = payload(result, self.config.fit, {})
-        validator = Validator(content, device="cpu")
+        validator = self._validator(result)
         ids = list(self.cache.edges)
         p = validator.predict_samples([self.cache.samples[e] for e in ids], batch_size=128)
         return dict(zip(ids, (float(v) for v in p), strict=True))
+
+
+def _checkpoint_of(workspace: Path, model: str | None) -> Path | None:
+    """The file of the model whose predictions are in use: a version's, or the bundled one."""
+    version = registry.version_of(model)
+    if version is not None:
+        return registry.model_path(workspace, version)
+    if model is not None and model.startswith(f"{BUNDLED_MODEL.name}:"):
+        return BUNDLED_MODEL
+    return None
 
 
 def _be_polite(config: TrainerConfig) -> None:
@@ -276,6 +316,13 @@ def _be_polite(config: TrainerConfig) -> None:
         # (p95 label latency 114 → 184 ms on two cores); SCHED_IDLE runs it only on idle time.
         with contextlib.suppress(AttributeError, OSError):  # not Linux
             os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+
+
+def _team_lock_of(store: LabelStore) -> LabelStore:
+    """The team store's trainer lock: a session advisory lock the server frees with the
+    connection, so a killed trainer on any host leaves none behind."""
+    store.trainer_lock()  # type: ignore[attr-defined]
+    return store  # the lock is held as long as the store's connection
 
 
 def _take_lock(workspace: Path) -> Any:

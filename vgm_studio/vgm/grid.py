@@ -160,7 +160,8 @@ def pair_map(
     maps = pair_maps(
         [prev_points], [cur_points], [estimate], size=size, resolution=resolution, sigma=sigma
     )
-    return maps[0]
+    first: NDArray[np.float32] = maps[0]
+    return first
 
 
 def pair_maps(

@@ -1,0 +1,291 @@
+"""The one training loop: class-balanced draws, rigid rotations, one-cycle Adam, early stopping.
+
+``vgm-studio train`` (``training.train``) and the background trainer (``trainer.fit``) both
+train networks here; what differs between them (batch, rate, epoch size, a warm start, where
+it runs, who hears of each epoch) comes in as parameters.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+from torch import nn
+from tqdm import tqdm
+
+from vgm_studio.core.decision import DEFAULT_THRESHOLD
+from vgm_studio.model.features import PairSample
+from vgm_studio.model.metrics import binary_metrics
+from vgm_studio.model.validator import InputSpec, batched_logits, forward
+
+EpochHook = Callable[[int, int], None]
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """How a network is trained.
+
+    Attributes:
+        epochs: Epochs at most.
+        epoch_size: Class-balanced draws per epoch (None: the training rows' count).
+        batch_size: Pairs per step.
+        lr: Peak Adam learning rate of the one-cycle schedule.
+        weight_decay: Adam weight decay.
+        patience: Stop after this many epochs without a better validation loss.
+        augment: Turn each training pair by a random rigid rotation.
+        seed: Seeds the draws and the rotations.
+    """
+
+    epochs: int = 12
+    epoch_size: int | None = 6000
+    batch_size: int = 64
+    lr: float = 2e-3
+    weight_decay: float = 1e-4
+    patience: int = 4
+    augment: bool = True
+    seed: int = 0
+
+
+@dataclass
+class Fitted:
+    """The best epoch's weights, its validation p(success), cut and figures, and the epochs."""
+
+    state_dict: dict[str, torch.Tensor]
+    val_p: NDArray[np.float64]
+    threshold: float
+    metrics: dict[str, Any]
+    history: list[dict[str, float]]
+
+
+@dataclass(frozen=True)
+class Rows:
+    """The data a network is fitted on: every row's sample and label, split in two."""
+
+    samples: Sequence[PairSample]
+    labels: NDArray[np.bool_]
+    train: NDArray[np.int64]
+    val: NDArray[np.int64]
+
+
+def choose_threshold(labels: NDArray[np.bool_], probs: NDArray[np.float64]) -> float:
+    """The p(success) cut with the best validation accuracy.
+
+    Training draws both classes equally often, so its p = 0.5 is the cut for a 50/50 world;
+    the validation split keeps the logs' own class mix, so the cut is chosen there. Ties go
+    to the cut nearest 0.5.
+    """
+    cuts = np.round(np.arange(0.02, 0.99, 0.01), 2)
+    acc = np.array([np.mean((probs >= c) == labels) for c in cuts])
+    best = np.flatnonzero(acc >= acc.max() - 1e-12)
+    return float(cuts[best[np.argmin(np.abs(cuts[best] - 0.5))]])
+
+
+def judge(labels: NDArray[np.bool_], p: NDArray[np.float64]) -> tuple[float, dict[str, Any]]:
+    """The cut chosen on validation rows and the figures there; the default cut without any."""
+    if not len(labels):
+        return DEFAULT_THRESHOLD, {}
+    threshold = choose_threshold(labels, p)
+    return threshold, binary_metrics(labels, p, threshold)
+
+
+def balanced_draws(
+    labels: NDArray[np.bool_], count: int, rng: np.random.Generator
+) -> NDArray[np.int64]:
+    """``count`` row indices drawn with replacement, each class half of the time."""
+    pos = max(int(labels.sum()), 1)
+    neg = max(int((~labels).sum()), 1)
+    weights = np.where(labels, 0.5 / pos, 0.5 / neg)
+    return rng.choice(len(labels), size=count, replace=True, p=weights / weights.sum())
+
+
+def balanced_bce(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """BCE in which both classes weigh the same, whatever their counts."""
+    pos = target.sum().clamp(min=1)
+    neg = (1 - target).sum().clamp(min=1)
+    w = torch.where(target > 0.5, 0.5 / pos, 0.5 / neg)
+    return (
+        nn.functional.binary_cross_entropy_with_logits(logits, target, reduction="none") * w
+    ).sum()
+
+
+def train_step(
+    net: nn.Module,
+    spec: InputSpec,
+    samples: Sequence[PairSample],
+    labels: NDArray[np.bool_],
+    rotations: NDArray[np.float64] | None,
+    optimiser: torch.optim.Optimizer,
+    schedule: torch.optim.lr_scheduler.LRScheduler,
+    device: torch.device,
+) -> float:
+    """One optimiser step on a batch (each pair turned by ``rotations``); returns its loss."""
+    x, extra = spec.tensors(samples, device, rotations)
+    y = torch.from_numpy(labels.astype(np.float32)).to(device)
+    loss = nn.functional.binary_cross_entropy_with_logits(forward(net, x, extra), y)
+    optimiser.zero_grad(set_to_none=True)
+    loss.backward()  # type: ignore[no-untyped-call]
+    optimiser.step()
+    schedule.step()
+    return float(loss.detach())
+
+
+def _p_success(
+    net: nn.Module, spec: InputSpec, samples: Sequence[PairSample], device: torch.device
+) -> NDArray[np.float64]:
+    return np.asarray(1.0 / (1.0 + np.exp(-batched_logits(net, spec, samples, device, 128))))
+
+
+def fit_network(
+    net: nn.Module,
+    spec: InputSpec,
+    rows: Rows,
+    recipe: Recipe,
+    device: torch.device,
+    *,
+    on_epoch: EpochHook | None = None,
+    log: Callable[[str], None] | None = None,
+    progress: bool = False,
+) -> Fitted:
+    """Trains ``net`` on ``rows.train``, stops early on ``rows.val``, and judges it there.
+
+    Args:
+        net: The network, on ``device``, with its starting weights (fresh or warm).
+        spec: How its input batches are made.
+        rows: The samples, labels and split.
+        recipe: How to train.
+        device: Where.
+        on_epoch: Called with (epochs done, epochs planned) before training and after each
+            epoch; it may raise to stop the run.
+        log: Told one line per epoch.
+        progress: Show a progress bar per epoch.
+
+    Returns:
+        The best epoch's weights (the last one's when nothing is held out) and its figures.
+    """
+    run = _Run(net, spec, rows, recipe, device)
+    best_loss, best_state, stale = math.inf, copy.deepcopy(net.state_dict()), 0
+    history: list[dict[str, float]] = []
+    if on_epoch:
+        on_epoch(0, recipe.epochs)
+    for epoch in range(1, recipe.epochs + 1):
+        record = run.epoch(epoch, progress)
+        history.append(record)
+        if log is not None:
+            log(_epoch_line(record))
+        # Nothing held out: the last epoch is the best we know.
+        val_loss = record.get("val_loss", -float(epoch))
+        if val_loss < best_loss - 1e-4:
+            best_loss, best_state, stale = val_loss, copy.deepcopy(net.state_dict()), 0
+        else:
+            stale += 1
+        if on_epoch:
+            on_epoch(epoch, recipe.epochs)
+        if stale >= recipe.patience:
+            if log is not None:
+                log(f"stopping: no better validation loss for {recipe.patience} epochs")
+            break
+    net.load_state_dict(best_state)
+    return _judged(net, spec, run.val_samples, run.val_labels, device, best_state, history)
+
+
+class _Run:
+    """One training run's moving parts: the optimiser, its schedule and the draws' generator."""
+
+    def __init__(
+        self, net: nn.Module, spec: InputSpec, rows: Rows, recipe: Recipe, device: torch.device
+    ) -> None:
+        self.net, self.spec, self.rows, self.recipe, self.device = net, spec, rows, recipe, device
+        self.rng = np.random.default_rng(recipe.seed)
+        self.optimiser = torch.optim.Adam(
+            net.parameters(), lr=recipe.lr, weight_decay=recipe.weight_decay
+        )
+        self.per_epoch = recipe.epoch_size or len(rows.train)
+        self.steps = math.ceil(self.per_epoch / recipe.batch_size)
+        self.schedule = torch.optim.lr_scheduler.OneCycleLR(
+            self.optimiser, recipe.lr, total_steps=recipe.epochs * self.steps
+        )
+        self.val_samples = [rows.samples[i] for i in rows.val]
+        self.val_labels = rows.labels[rows.val]
+
+    def epoch(self, epoch: int, progress: bool) -> dict[str, float]:
+        """Trains one epoch of class-balanced draws; returns its losses and seconds."""
+        t0 = time.perf_counter()
+        rows, size = self.rows, self.recipe.batch_size
+        self.net.train()
+        draws = rows.train[balanced_draws(rows.labels[rows.train], self.per_epoch, self.rng)]
+        bar = tqdm(
+            range(self.steps),
+            desc=f"epoch {epoch}/{self.recipe.epochs}",
+            unit="batch",
+            disable=None if progress else True,
+            leave=False,
+        )
+        total = 0.0
+        for step in bar:
+            idx = draws[step * size : (step + 1) * size]
+            rot = self.rng.uniform(0, 2 * np.pi, len(idx)) if self.recipe.augment else None
+            batch = [rows.samples[i] for i in idx]
+            total += train_step(
+                self.net,
+                self.spec,
+                batch,
+                rows.labels[idx],
+                rot,
+                self.optimiser,
+                self.schedule,
+                self.device,
+            )
+            bar.set_postfix(loss=f"{total / (step + 1):.3f}")
+        record = {"epoch": epoch, "train_loss": total / self.steps}
+        if len(self.val_labels):
+            record |= _validation(
+                self.net, self.spec, self.val_samples, self.val_labels, self.device
+            )
+        record["seconds"] = time.perf_counter() - t0
+        return record
+
+
+def _validation(
+    net: nn.Module,
+    spec: InputSpec,
+    samples: Sequence[PairSample],
+    labels: NDArray[np.bool_],
+    device: torch.device,
+) -> dict[str, float]:
+    """The balanced loss and the accuracy at p = 0.5 on the validation rows."""
+    logits = torch.from_numpy(batched_logits(net, spec, samples, device, 128))
+    target = torch.from_numpy(labels.astype(np.float32))
+    return {
+        "val_loss": float(balanced_bce(logits, target)),
+        "val_accuracy": float(((logits > 0).numpy() == labels).mean()),
+    }
+
+
+def _epoch_line(record: dict[str, float]) -> str:
+    line = f"epoch {int(record['epoch']):2d}: train loss {record['train_loss']:.3f}"
+    if "val_loss" in record:
+        line += f"  val loss {record['val_loss']:.3f}  val accuracy {record['val_accuracy']:.3f}"
+    return line + f"  ({record['seconds']:.0f} s)"
+
+
+def _judged(
+    net: nn.Module,
+    spec: InputSpec,
+    samples: Sequence[PairSample],
+    labels: NDArray[np.bool_],
+    device: torch.device,
+    state: dict[str, torch.Tensor],
+    history: list[dict[str, float]],
+) -> Fitted:
+    """The fitted weights with the cut and figures chosen on the validation rows."""
+    p = _p_success(net, spec, samples, device) if len(labels) else np.zeros(0)
+    threshold, metrics = judge(labels, p)
+    weights = {k: v.detach().cpu() for k, v in state.items()}
+    return Fitted(weights, p, threshold, metrics, history)
