@@ -132,10 +132,22 @@ def test_a_broken_log_is_a_failed_row_and_the_others_succeed(first_run, logs):
         # The worker loaded the model once, in its constructor, not once per log.
         assert row["model_loads"] == 1 and row["attempts"] == 1
     assert loop["loops_total"] > 0
-    # Only the log with relations has relation errors.
+    # The log with a relations file is scored by it; the corridor, which has none, by
+    # relations drawn from its own TRUEPOS reference poses (as `slam` scores any such log).
     assert loop["after_trans_mean_m"] is not None and loop["relations_n"] > 100
-    assert corridor["after_trans_mean_m"] is None
+    assert corridor["after_trans_mean_m"] is not None and corridor["relations_n"] > 0
     assert (first_run / "after-maps.png").stat().st_size > 1000
+
+
+def _approx(a: object, b: object) -> bool:
+    """Equal JSON values, floats within a relative 1e-6."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_approx(a[k], b[k]) for k in a)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_approx(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, float) or isinstance(b, float):
+        return bool(a == pytest.approx(b, rel=1e-6))
+    return a == b
 
 
 def test_figures_equal_the_single_log_commands(first_run, logs, tmp_path):
@@ -146,11 +158,8 @@ def test_figures_equal_the_single_log_commands(first_run, logs, tmp_path):
     single_doc = json.loads(single.read_text())
     assert set(fleet_doc) == set(single_doc)
     for key in set(single_doc) - TIMING:
-        if isinstance(single_doc[key], dict):
-            for k, v in single_doc[key].items():
-                assert fleet_doc[key][k] == pytest.approx(v, rel=1e-6), (key, k)
-        else:
-            assert fleet_doc[key] == single_doc[key], key
+        # Floats to 1e-6: a batch of other pairs beside an edge moves p(success) by ~1e-7.
+        assert _approx(fleet_doc[key], single_doc[key]), key
     row = next(r for r in read_table(first_run / "fleet.parquet") if r["name"] == "loop")
     assert row["loops_kept"] == single_doc["loops_kept"]
     assert row["after_trans_mean_m"] == pytest.approx(single_doc["after"]["trans_mean"])

@@ -151,11 +151,14 @@ PAYLOADS = (
 def test_text_from_files_and_text_boxes_shows_literally_and_runs_nothing(office_edges, tmp_path):
     store = LabelStore(tmp_path / "ws")
     edges = read_edges(office_edges)[:3]
-    first = dataclasses.replace(edges[0], match={**edges[0].match, "iterations": PAYLOADS[0]})
-    store.add_edges([first, *edges[1:]])
+    # The edges file's own numbers (match.iterations and friends) are typed by the edge
+    # schema now, so the payloads come in as imported annotators and notes.
+    first = edges[0]
+    store.add_edges(edges)
     when = "2026-01-01T00:00:00+00:00"
     store.import_label(LabelRecord(first.edge_id, PAYLOADS[1], "success", PAYLOADS[2], when))
     store.import_label(LabelRecord(first.edge_id, "bob", "failure", PAYLOADS[1], when))
+    store.import_label(LabelRecord(first.edge_id, PAYLOADS[0], "failure", PAYLOADS[0], when))
     served = _serve(store)
     try:
         with chromium() as browser:

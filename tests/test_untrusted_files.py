@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import sqlite3
 
 import numpy as np
 import pytest
@@ -147,11 +148,14 @@ def test_a_failure_while_writing_rolls_the_whole_import_back(tmp_path):
     rows = [label_row(edges[0]), label_row(edges[1]), label_row(edges[2], annotator="zed")]
     path = write_jsonl(tmp_path / "l.jsonl", rows)
     store = LabelStore(tmp_path / "ws")
-    # A real SQLite trigger makes the third label's write fail, after two edges and labels.
-    store._db.execute(
-        "CREATE TRIGGER boom BEFORE INSERT ON labels WHEN NEW.annotator = 'zed' "
-        "BEGIN SELECT RAISE(ABORT, 'boom'); END"
-    )
+    # A real SQLite trigger, put in the file by a second connection, makes the third label's
+    # write fail, after two edges and labels.
+    with sqlite3.connect(store.path) as other:
+        other.execute(
+            "CREATE TRIGGER boom BEFORE INSERT ON labels WHEN NEW.annotator = 'zed' "
+            "BEGIN SELECT RAISE(ABORT, 'boom'); END"
+        )
+    other.close()
     with pytest.raises(Exception, match="boom"):
         import_labels(store, path)
     assert store.count_edges() == 0 and store.labels() == [] and store.history() == []

@@ -23,7 +23,7 @@ from vgm_studio.labels.check import check_workspace, check_writable
 SCHEMA = 1
 FORMAT = "vgm-studio-workspace"
 DB_NAME = "labels.sqlite"
-_HINT = "; the workspace folder and its files must be writable (not read-only or immutable)"
+HINT = "; the workspace folder and its files must be writable (not read-only or immutable)"
 
 TABLES = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -107,18 +107,18 @@ class Database:
             self._db.execute("PRAGMA foreign_keys=ON")
             self._db.execute("PRAGMA busy_timeout=5000")
         except sqlite3.OperationalError as exc:  # read-only, immutable, locked: not damage
-            raise InputError(path, f"cannot open the label store ({exc}){_HINT}") from None
+            raise InputError(path, f"cannot open the label store ({exc}){HINT}") from None
         except sqlite3.DatabaseError as exc:
             raise InputError(path, f"not a VGM Studio workspace ({exc})") from None
         except (OSError, sqlite3.Error) as exc:
-            raise InputError(path, f"cannot open the label store ({exc}){_HINT}") from None
+            raise InputError(path, f"cannot open the label store ({exc}){HINT}") from None
         self._lock = threading.RLock()
         self._depth = 0
         if fresh:
             try:
                 self._create()
             except sqlite3.OperationalError as exc:
-                raise InputError(path, f"cannot make the label store ({exc}){_HINT}") from None
+                raise InputError(path, f"cannot make the label store ({exc}){HINT}") from None
         self._check_version()
         check_workspace(self._db, path, TABLES)
         if writable:  # the commands that may make a store are those that write to it

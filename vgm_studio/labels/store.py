@@ -20,7 +20,7 @@ from typing import Any
 
 from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.errors import InputError
-from vgm_studio.labels.database import DB_NAME, Database, now
+from vgm_studio.labels.database import DB_NAME, HINT, Database, now
 from vgm_studio.labels.records import Event, LabelRecord, Predictions
 from vgm_studio.labels.repository import LabelRepository
 from vgm_studio.labels.schema import aware
@@ -61,7 +61,7 @@ class LabelStore:
         try:
             self.workspace.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise InputError(self.path, f"cannot open the label store ({exc})") from None
+            raise InputError(self.path, f"cannot open the label store ({exc}){HINT}") from None
         self._db = Database(self.path, durable, writable=create)
         self.versions = ModelVersions(self._db, self.workspace)
         self.trainer = TrainerTables(self._db)

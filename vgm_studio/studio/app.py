@@ -51,9 +51,7 @@ class Studio:
         train_now: Called by the panel's "Train now"; None: no trainer runs beside it.
 
     Example:
-        >>> studio = Studio(LabelStore("ws"), StudioConfig(port=8080))
-        >>> studio.start()
-        >>> print(studio.url)
+        >>> studio = Studio(LabelStore("ws"), StudioConfig(port=8080)); studio.start()
     """
 
     def __init__(
