@@ -11,7 +11,7 @@ import copy
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -51,6 +51,12 @@ class Recipe:
     patience: int = 4
     augment: bool = True
     seed: int = 0
+
+    @classmethod
+    def of(cls, config: object) -> Recipe:
+        """The recipe held by a config that names the same fields (``TrainConfig``, the
+        trainer's ``FitConfig``), so each spells its defaults but not the copy."""
+        return cls(**{f.name: getattr(config, f.name) for f in fields(cls)})
 
 
 @dataclass

@@ -63,16 +63,7 @@ class FitConfig:
 
     def recipe(self) -> Recipe:
         """The shared training loop's part of the config."""
-        return Recipe(
-            epochs=self.epochs,
-            epoch_size=self.epoch_size,
-            batch_size=self.batch_size,
-            lr=self.lr,
-            weight_decay=self.weight_decay,
-            patience=self.patience,
-            augment=self.augment,
-            seed=self.seed,
-        )
+        return Recipe.of(self)
 
 
 @dataclass
