@@ -107,3 +107,15 @@ def balanced_office_edges(office_edges) -> Path:
     path = office_edges.parent / "balanced.jsonl"
     write_edges(path, out)
     return path
+
+
+@pytest.fixture(scope="session")
+def needs_chromium() -> None:
+    """Skips a browser test without Debian's chromium; under CI=true its absence fails."""
+    from benchmarks.studio_browser import chromium_path
+
+    if chromium_path() is None:
+        reason = "Debian chromium is not installed (.ci/run installs it)"
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(f"CI=true but {reason}")
+        pytest.skip(reason)

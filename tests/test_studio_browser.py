@@ -10,20 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.studio_browser import StudioPage, chromium, chromium_path, free_port, studio_process
+from benchmarks.studio_browser import StudioPage, chromium, free_port, studio_process
 from vgm_studio.labels import LabelStore
 from vgm_studio.matching.edges import read_edges
 
-pytestmark = pytest.mark.slow
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _needs_chromium():
-    if chromium_path() is None:
-        reason = "Debian chromium is not installed (.ci/run installs it)"
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(f"CI=true but {reason}")
-        pytest.skip(reason)
+pytestmark = [pytest.mark.slow, pytest.mark.usefixtures("needs_chromium")]
 
 
 def _labels(workspace: Path) -> list[tuple[str, str, str]]:

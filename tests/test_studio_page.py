@@ -15,25 +15,16 @@ import cv2
 import numpy as np
 import pytest
 
-from benchmarks.studio_browser import StudioPage, chromium, chromium_path, free_port
+from benchmarks.studio_browser import StudioPage, chromium, free_port
 from vgm_studio.labels import LabelRecord, LabelStore
 from vgm_studio.matching.edges import read_edges
 from vgm_studio.studio.app import Studio, StudioConfig
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.usefixtures("needs_chromium")]
 # The camera test's presses; 500 is the target run by hand, fewer keep CI short.
 PRESSES = int(os.environ.get("VGM_STUDIO_PRESSES", "120"))
 PANEL_X = 1000  # the panel starts right of this at 1400 px wide; the 3D view is left of it
 BACKGROUND_TOLERANCE = 40
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _needs_chromium():
-    if chromium_path() is None:
-        reason = "Debian chromium is not installed (.ci/run installs it)"
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(f"CI=true but {reason}")
-        pytest.skip(reason)
 
 
 def _serve(store: LabelStore) -> Studio:
