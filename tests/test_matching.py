@@ -112,3 +112,20 @@ def test_kiss_moved_reports_how_far_kiss_icp_moved_the_guess(office):
     assert fig["kiss_moved"] > 0.005
     # Existing keys keep their names.
     assert {"iterations", "converged", "inlier_ratio", "residual", "covariance"} <= set(fig)
+
+
+def test_covariance_of_two_parallel_walls_is_positive_and_open_along_them():
+    # Two walls, parallel to a millimetre over 20 m: almost nothing fixes the position along
+    # them. A plain inverse of such information can come out with negative variances.
+    from vgm_studio.matching.refinement import Target, refine
+
+    x = np.linspace(-10.0, 10.0, 400)
+    walls = np.vstack(
+        [np.column_stack([x, np.full_like(x, 1.0)]), np.column_stack([x, -1.0 + 5e-5 * x])]
+    )
+    noisy = walls + np.random.default_rng(0).normal(0.0, 0.01, walls.shape)
+    result = refine(Target.build(walls, 5), noisy, np.zeros(3), max_iterations=5)
+    assert result.covariance is not None
+    assert np.all(np.linalg.eigvalsh(result.covariance) >= 0.0)
+    # Along the walls (x) the variance dwarfs the one across them (y).
+    assert result.covariance[0, 0] > 1e3 * result.covariance[1, 1]

@@ -120,8 +120,9 @@ class Agreement:
 def _sigmas(motion: Motion, odo: NDArray[np.float64]) -> tuple[float, float]:
     """σ of the translation and heading disagreement of one step."""
     cov = motion.covariance
-    match_t2 = 0.0 if cov is None else float(cov[0, 0] + cov[1, 1])
-    match_r2 = 0.0 if cov is None else float(cov[2, 2])
+    # A covariance is never negative; one that says so (a foreign one) counts as none.
+    match_t2 = 0.0 if cov is None else max(0.0, float(cov[0, 0] + cov[1, 1]))
+    match_r2 = 0.0 if cov is None else max(0.0, float(cov[2, 2]))
     odo_t2 = (ODOMETRY_FRACTION * math.hypot(odo[0], odo[1])) ** 2
     odo_r2 = (ODOMETRY_FRACTION * abs(odo[2])) ** 2
     return math.sqrt(match_t2 + odo_t2), math.sqrt(match_r2 + odo_r2)

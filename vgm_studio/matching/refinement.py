@@ -169,10 +169,7 @@ def _judged(
     if count > 3:
         jac = _jacobian(n[inliers], moved[inliers] - pose[:2])
         sigma2 = float(np.sum(r[inliers] ** 2)) / (count - 3)
-        try:
-            covariance = np.asarray(sigma2 * np.linalg.inv(jac.T @ jac), dtype=np.float64)
-        except np.linalg.LinAlgError:
-            covariance = None
+        covariance = _covariance(jac, sigma2)
     return Refinement(
         estimate=pose,
         iterations=iterations,
@@ -181,3 +178,19 @@ def _judged(
         residual=residual,
         covariance=covariance,
     )
+
+
+def _covariance(jac: NDArray[np.float64], sigma2: float) -> NDArray[np.float64] | None:
+    """σ² (JᵀJ)⁻¹, kept positive semi-definite.
+
+    Along a corridor JᵀJ is near singular and a plain inverse can come out with negative
+    variances from rounding; inverting through the eigenvalues gives the weak direction a
+    huge but positive variance instead.
+    """
+    info = jac.T @ jac
+    if not np.all(np.isfinite(info)):
+        return None
+    values, vectors = np.linalg.eigh(info)
+    if values[-1] <= 0.0 or values[0] <= values[-1] * 1e-15:
+        return None  # singular: no covariance, as the matcher has always said
+    return np.asarray(sigma2 * (vectors / values) @ vectors.T, dtype=np.float64)
