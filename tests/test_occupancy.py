@@ -65,9 +65,19 @@ def test_a_map_of_a_thousand_scans_is_vectorised():
     assert grid.known_cells() > 50_000
 
 
-def test_a_scattered_trajectory_is_refused_with_a_clear_message():
+def test_a_large_building_is_drawn_with_coarser_cells_that_fit():
     poses = np.array([[0.0, 0.0, 0.0], [500.0, 0.0, 0.0]])
-    with pytest.raises(InputError, match="over the 6000-cell limit"):
+    grid = build_map(poses, [wall_scan(), wall_scan()], MapConfig())
+    assert max(grid.shape) <= MapConfig().max_cells
+    assert grid.resolution > MapConfig().resolution
+    # Both walls are still in it, 500 m apart.
+    assert grid.known_cells() > 0
+    assert grid.shape[1] * grid.resolution > 500.0
+
+
+def test_a_scattered_trajectory_is_refused_with_a_clear_message():
+    poses = np.array([[0.0, 0.0, 0.0], [5000.0, 0.0, 0.0]])
+    with pytest.raises(InputError, match="the trajectory is broken"):
         build_map(poses, [wall_scan(), wall_scan()], MapConfig())
 
 

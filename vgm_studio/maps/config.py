@@ -15,8 +15,11 @@ class MapConfig:
         log_odds_hit: Log-odds added to the cell a beam ends in.
         log_odds_miss: Log-odds added to each cell a beam crosses.
         clamp: Log-odds are kept within ±this, so a map can still change its mind.
-        max_cells: A map larger than this many cells on a side is refused (a broken graph
-            can scatter scans over kilometres).
+        max_cells: A map larger than this many cells on a side is drawn with coarser cells
+            so that it fits (a large building still gets a picture, at a resolution that
+            keeps it within memory)…
+        max_resolution: …up to this cell edge, metres; past it the map is refused (a broken
+            graph can scatter scans over kilometres).
     """
 
     resolution: float = 0.05
@@ -25,3 +28,4 @@ class MapConfig:
     log_odds_miss: float = -0.4
     clamp: float = 5.0
     max_cells: int = 6000
+    max_resolution: float = 0.5

@@ -76,22 +76,28 @@ def build_map(
         config: Resolution, log-odds increments, clamp and size limit.
         margin: Free border around everything drawn, metres.
 
+    Returns:
+        The grid at ``config.resolution``, or coarser where that would exceed
+        ``config.max_cells`` on a side (``grid.resolution`` says which).
+
     Raises:
-        InputError: The map would exceed ``config.max_cells`` on a side.
+        InputError: Even cells of ``config.max_resolution`` would exceed ``max_cells``.
     """
     points = [p[np.hypot(p[:, 0], p[:, 1]) <= config.max_range] for p in points]
     world = _world_points(poses, points)
-    res = config.resolution
-    lo = np.floor((world.min(axis=0) - margin) / res) * res
-    hi = world.max(axis=0) + margin
-    width, height = (int(v) for v in np.ceil((hi - lo) / res))
-    if max(width, height) > config.max_cells:
+    lo_m = world.min(axis=0) - margin
+    extent = world.max(axis=0) + margin - lo_m
+    # One cell less: aligning the origin to the cells adds up to one.
+    res = max(config.resolution, float(extent.max()) / (config.max_cells - 1))
+    if res > config.max_resolution:
         raise InputError(
             None,
-            f"the map would be {width * res:.0f} m × {height * res:.0f} m "
-            f"({width} × {height} cells at {res:g} m), over the {config.max_cells}-cell limit: "
-            "the trajectory is broken or the resolution too fine",
+            f"the map would be {extent[0]:.0f} m × {extent[1]:.0f} m, over "
+            f"{config.max_cells} cells of {config.max_resolution:g} m on a side: "
+            "the trajectory is broken",
         )
+    lo = np.floor(lo_m / res) * res
+    width, height = (int(v) for v in np.ceil((world.max(axis=0) + margin - lo) / res))
     grid = OccupancyGrid(
         np.zeros((height, width), dtype=np.float32), (float(lo[0]), float(lo[1])), res
     )

@@ -130,6 +130,9 @@ def _write_outputs(
         t = time.perf_counter()
         maps = run_maps(source.log, result, config.maps)
         result.seconds["maps"] = time.perf_counter() - t
+        for name, grid in maps.items():
+            if grid.resolution > config.maps.resolution:
+                say(f"the {name} map is {grid.resolution:.2f} m a cell, to fit its size")
     if outputs.maps is not None and maps is not None:
         edges = ("after", loop_segments(result), LOOP_COLOURS)
         for path in write_maps(outputs.maps, maps, edges):
