@@ -199,9 +199,10 @@ class FrontEnd:
         self._submaps.clear()
         poses = self.estimate.poses
         candidates = window_candidates(block, poses, self._uncertainty, self.config)
-        # Place recognition where the window search has nothing to offer: a revisit the
-        # estimate has lost track of (and it spares the matcher many wide searches).
-        searched = {c.b for c in candidates}
+        # Place recognition where the window search cannot be trusted to hold the place: no
+        # candidate, or a window clamped smaller than the drift (a revisit the estimate has
+        # lost track of). Where the window covers the drift it spares many wide searches.
+        searched = {c.b for c in candidates if c.covers}
         lost = [b for b in block if b not in searched]
         candidates += place_candidates(lost, self._places, self.scans, self.config)
         candidates += self._injected(block)
@@ -274,7 +275,9 @@ class FrontEnd:
         if not self.consistency.enabled or not loops:
             return
         checked = [Loop(e.a, e.b, e.estimate, graph_edge(e, self.graph).covariance) for e in loops]
-        flags = consistent(checked, poses, self._graph_uncertainty, self.consistency)
+        flags = consistent(
+            checked, poses, self._graph_uncertainty, self.consistency, drift=self._uncertainty
+        )
         for e, ok in zip(loops, flags, strict=True):
             e.consistency = "kept" if ok else "rejected"
             e.kept = bool(ok)
