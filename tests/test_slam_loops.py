@@ -165,3 +165,27 @@ def test_a_group_of_agreeing_loops_outvotes_a_drifted_estimate(weight):
     ]
     flags = consistent(loops, estimate, graph, ConsistencyConfig(estimate_weight=weight))
     assert flags.all()
+
+
+def test_a_loop_that_moves_the_map_past_the_drift_needs_a_group_that_agrees():
+    truth = ring()
+    wide = chain(truth, LOOP_COV * 25)  # the graph's floors: it would let either through
+    drift = chain(truth, STEP_COV)  # the scan matchers' drift: 1.5 m is a surprise
+    estimate = truth.copy()
+    estimate[60:, :2] += 1.5
+    loops = [
+        Loop(a, a + 90, se2.between(truth[a], truth[a + 90]), LOOP_COV) for a in range(0, 8, 2)
+    ]
+    config = ConsistencyConfig(min_support=2)
+    # One convincing match alone: an alias as far as the check can tell.
+    assert not consistent(loops[:1], estimate, wide, config, drift=drift)[0]
+    assert not consistent(loops[:2], estimate, wide, config, drift=drift).any()
+    # Three or more that agree: a revisit after drift, kept.
+    assert consistent(loops[:3], estimate, wide, config, drift=drift).all()
+    assert consistent(loops, estimate, wide, config, drift=drift).all()
+    # Without the drift view, or with no support asked, one is enough.
+    assert consistent(loops[:1], estimate, wide, config)[0]
+    no_support = ConsistencyConfig(min_support=0)
+    assert consistent(loops[:1], estimate, wide, no_support, drift=drift)[0]
+    # A loop the drift explains needs no support.
+    assert consistent(loops[:1], truth, wide, config, drift=drift)[0]
