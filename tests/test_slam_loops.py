@@ -102,6 +102,9 @@ def test_window_search_widens_after_a_long_corridor_and_gates_by_mahalanobis():
     assert found and all(c.source == "window" for c in found)
     assert {c.a for c in found} <= set(range(0, 12))
     assert all(c.linear == config.window_linear[1] for c in found)
+    # Clamped smaller than the drift: the window may miss the place, so place recognition
+    # is asked too (``covers`` is what the front end reads).
+    assert not any(c.covers for c in found)
     # A scan matcher's heading drift over 200 m is about a degree: the narrowest turn.
     assert all(
         c.angular == pytest.approx(math.radians(config.window_angular_deg[0])) for c in found
@@ -113,6 +116,7 @@ def test_window_search_widens_after_a_long_corridor_and_gates_by_mahalanobis():
     graph.add(GraphEdge(0, count - 1, se2.between(poses[0], poses[-1]), LOOP_COV))
     tight = window_candidates(block, poses, graph, config)
     assert tight and all(c.linear == config.window_linear[0] for c in tight)
+    assert all(c.covers for c in tight)
     far = poses.copy()
     far[count - 5 :, 1] += 6.0
     assert window_candidates(block, far, graph, config) == []
