@@ -191,5 +191,8 @@ def test_a_loop_that_moves_the_map_past_the_drift_needs_a_group_that_agrees():
     assert consistent(loops[:1], estimate, wide, config)[0]
     no_support = ConsistencyConfig(min_support=0)
     assert consistent(loops[:1], estimate, wide, no_support, drift=drift)[0]
-    # A loop the drift explains needs no support.
+    # A loop the drift explains needs no support, unless place recognition proposed it.
     assert consistent(loops[:1], truth, wide, config, drift=drift)[0]
+    place = [Loop(x.a, x.b, x.measurement, x.covariance, place=True) for x in loops]
+    assert not consistent(place[:1], truth, wide, config, drift=drift)[0]
+    assert consistent(place[:3], truth, wide, config, drift=drift).all()

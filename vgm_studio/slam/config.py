@@ -133,8 +133,9 @@ class ConsistencyConfig:
             covariance is the graph's own (wide) one, so by default it vetoes what the graph
             is sure of: a group of aliased loops (a corridor matched one door along, a
             symmetric hall matched to its mirror) agrees with itself and would outvote it.
-        min_support: A loop that moves the map by more than the scan matchers drift is kept
-            only in a group of more than this many agreeing loops (0: alone too). A revisit
+        min_support: A loop that moves the map by more than the scan matchers drift, or one
+            from place recognition, is kept only in a group of more than this many agreeing
+            loops (0: alone too). A revisit
             after long drift yields a run of loops from consecutive keyframes; one convincing
             alias in a corridor yields one.
     """

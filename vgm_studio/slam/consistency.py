@@ -16,9 +16,9 @@ a loop that disagrees is rejected even when it is the only one; where it is not 
 loops that agree with one another outvote it.
 
 A loop that moves the map by more than the scan matchers can have drifted (judged with the
-drift's narrower covariance) is a surprise; a long corridor or a row of identical rooms can
-produce one convincing but wrong match, so a surprise is kept only in a group of more than
-``min_support`` agreeing loops: the temporal-consistency check of place recognition systems
+drift's narrower covariance), and any loop from place recognition, is a surprise; a long
+corridor or a row of identical rooms can produce one convincing but wrong match, so a surprise
+is kept only in a group of more than ``min_support`` agreeing loops: the temporal-consistency check of place recognition systems
 (e.g. ORB-SLAM's three consecutive consistent loop candidates, Mur-Artal et al. 2015).
 """
 
@@ -47,6 +47,8 @@ class Loop:
     b: int
     measurement: NDArray[np.float64]
     covariance: NDArray[np.float64]
+    place: bool = False
+    """Proposed by place recognition, which the estimate never backed."""
 
 
 def consistent(
@@ -97,10 +99,15 @@ def _surprises(
     drift: UncertaintyGraph,
     gate: float,
 ) -> set[int]:
-    """The members that the estimate, with the scan matcher's drift, cannot explain."""
+    """The members that the estimate, with the scan matcher's drift, cannot explain, and
+    those from place recognition (however wide the drift, the estimate never backed them)."""
     ends = sorted({loops[i].a for i in members})
     rel = dict(zip(ends, drift.relative(ends, len(poses)), strict=True))
-    return {i for i in members if _fits_estimate(loops[i], poses, rel[loops[i].a]) > gate}
+    return {
+        i
+        for i in members
+        if loops[i].place or _fits_estimate(loops[i], poses, rel[loops[i].a]) > gate
+    }
 
 
 def _variances(cov: NDArray[np.float64]) -> tuple[float, float]:

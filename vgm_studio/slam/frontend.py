@@ -274,7 +274,10 @@ class FrontEnd:
     def _check_consistency(self, loops: list[SlamEdge], poses: NDArray[np.float64]) -> None:
         if not self.consistency.enabled or not loops:
             return
-        checked = [Loop(e.a, e.b, e.estimate, graph_edge(e, self.graph).covariance) for e in loops]
+        checked = [
+            Loop(e.a, e.b, e.estimate, graph_edge(e, self.graph).covariance, e.source == "place")
+            for e in loops
+        ]
         flags = consistent(
             checked, poses, self._graph_uncertainty, self.consistency, drift=self._uncertainty
         )
