@@ -68,6 +68,8 @@ class FrontEndConfig:
         false_loop_distance: How far apart the keyframes of an injected loop are at least, in
             the odometry estimate, metres.
         seed: Seeds the injected loops.
+        threads: Threads that match a block's loops at once (0: ``OMP_NUM_THREADS`` where
+            set, else the CPUs this process may use, at most 4). Results do not depend on it.
     """
 
     keyframe_distance: float = 0.5
@@ -92,6 +94,7 @@ class FrontEndConfig:
     false_loops: int = 0
     false_loop_distance: float = 5.0
     seed: int = 0
+    threads: int = 0
 
 
 @dataclass(frozen=True)

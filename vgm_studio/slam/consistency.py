@@ -18,8 +18,9 @@ loops that agree with one another outvote it.
 A loop that moves the map by more than the scan matchers can have drifted (judged with the
 drift's narrower covariance), and any loop from place recognition, is a surprise; a long
 corridor or a row of identical rooms can produce one convincing but wrong match, so a surprise
-is kept only in a group of more than ``min_support`` agreeing loops: the temporal-consistency check of place recognition systems
-(e.g. ORB-SLAM's three consecutive consistent loop candidates, Mur-Artal et al. 2015).
+is kept only in a group of more than ``min_support`` agreeing loops: the temporal-consistency
+check of place recognition systems (e.g. ORB-SLAM's three consecutive consistent loop
+candidates, Mur-Artal et al. 2015).
 """
 
 from __future__ import annotations
