@@ -34,6 +34,10 @@ class FrontEndConfig:
         window_angular_deg: (min, max) half-width in heading, degrees.
         place_candidates: Place-recognition candidates per keyframe that the window search
             found none for (0: none).
+        place_candidates_drifted: …and per keyframe whose window is clamped smaller than
+            three σ of the drift: the estimate has lost track of where it is, so more of the
+            descriptor's neighbours are worth a search (in a long corridor the right place
+            is often second or third: the infinite corridor went from 0.34 to 0.06 m with 3).
         place_max_distance: …whose Scan Context column-shift distance is at most this
             (0 same, 1 nothing in common).
         place_angular_deg: Half-width in heading of a place candidate's window around the
@@ -80,6 +84,7 @@ class FrontEndConfig:
     window_linear: tuple[float, float] = (0.3, 3.0)
     window_angular_deg: tuple[float, float] = (10.0, 30.0)
     place_candidates: int = 1
+    place_candidates_drifted: int = 3
     place_max_distance: float = 0.35
     place_angular_deg: float = 15.0
     drift_sigma_xy: float = 0.005

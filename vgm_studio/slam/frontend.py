@@ -223,9 +223,15 @@ class FrontEnd:
         # Place recognition where the window search cannot be trusted to hold the place: no
         # candidate, or a window clamped smaller than the drift (a revisit the estimate has
         # lost track of). Where the window covers the drift it spares many wide searches.
-        searched = {c.b for c in candidates if c.covers}
-        lost = [b for b in block if b not in searched]
-        candidates += place_candidates(lost, self._places, self.scans, self.config)
+        cfg = self.config
+        proposed = {c.b for c in candidates}
+        covered = {c.b for c in candidates if c.covers}
+        drifted = [b for b in block if b in proposed and b not in covered]
+        unseen = [b for b in block if b not in proposed]
+        candidates += place_candidates(unseen, self._places, self.scans, cfg)
+        candidates += place_candidates(
+            drifted, self._places, self.scans, cfg, cfg.place_candidates_drifted
+        )
         candidates += self._injected(block)
         # Submaps first (shared by candidates), then the matches, both on every thread: the
         # searches are numpy gathers that release the GIL, and each match is independent.

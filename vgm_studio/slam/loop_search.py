@@ -104,16 +104,22 @@ def _window_of(
 
 
 def place_candidates(
-    keyframes: Sequence[int], index: PlaceIndex, scans: Sequence[Scan], config: FrontEndConfig
+    keyframes: Sequence[int],
+    index: PlaceIndex,
+    scans: Sequence[Scan],
+    config: FrontEndConfig,
+    per_keyframe: int | None = None,
 ) -> list[Candidate]:
     """Earlier keyframes whose scan looks like that of each of ``keyframes``, whatever the
     estimate.
 
     The guess is "b stands where a stood, turned by the descriptor's yaw"; the window is the
     widest in x and y and ``place_angular_deg`` around that yaw. Pairs turned further than
-    ``loop_max_angle_deg`` are left out.
+    ``loop_max_angle_deg`` are left out. ``per_keyframe`` nearest descriptors are tried
+    (default ``config.place_candidates``).
     """
-    if config.place_candidates == 0:
+    count = config.place_candidates if per_keyframe is None else per_keyframe
+    if count == 0:
         return []
     out = []
     angular = math.radians(config.place_angular_deg)
@@ -124,7 +130,7 @@ def place_candidates(
         newest = b - config.loop_min_gap
         if newest < 0:
             continue
-        for m in index.query(scans[b].points(), k=config.place_candidates, max_key=newest):
+        for m in index.query(scans[b].points(), k=count, max_key=newest):
             if m.distance > config.place_max_distance or abs(m.yaw) > max_turn:
                 continue
             guess = np.array([0.0, 0.0, m.yaw])

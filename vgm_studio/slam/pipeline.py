@@ -91,7 +91,7 @@ def scan_poses(
     turn = se2.wrap_angle(there[:, 2] - here[:, 2])
     out = here + t[:, None] * (there - here)
     out[:, 2] = se2.wrap_angle(here[:, 2] + t * turn)
-    return out
+    return np.asarray(out, dtype=np.float64)
 
 
 def dense_reference(log: ScanLog, odometry: NDArray[np.float64]) -> NDArray[np.float64] | None:
