@@ -27,7 +27,7 @@ from vgm_studio.graph.config import GraphConfig
 from vgm_studio.graph.pose_graph import GraphEdge, RunningEstimate, edge_covariance
 from vgm_studio.matching.correlative import CorrelativeConfig, LoopMatcher, SearchWindow
 from vgm_studio.matching.descriptor import PlaceIndex
-from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.matching.matcher import MatchResult, ScanMatcher
 from vgm_studio.matching.submap import Submap
 from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
 from vgm_studio.slam.consistency import Loop, consistent
@@ -187,12 +187,32 @@ class FrontEnd:
             result = self.loop_matcher.match(
                 submap, self.scans[k - 1], self.scans[k], guess, window
             )
+            poor = result.covariance is None or result.inlier_ratio < cfg.sequential_retry_below
+            if poor and cfg.sequential_retry_below > 0:
+                result = self._wider(submap, k, guess, result)
             if result.covariance is None:
                 # Nothing scored (a scan that sees little): the pairwise matcher's answer.
                 result = self.matcher.match(self.scans[k - 1], self.scans[k], guess)
             edges.append(SlamEdge("sequential", k - 1, k, guess, result))
             poses[k] = se2.compose(poses[k - 1], edges[-1].estimate)
         return edges
+
+    def _wider(
+        self, submap: Submap, k: int, guess: NDArray[np.float64], small: MatchResult
+    ) -> MatchResult:
+        """Keyframe k matched again over the wide window around the odometry's step.
+
+        A small-window match that leaves most of the scan off the keyframe before it means
+        the odometry's step is off by more than the small window (kiss-icp lost, wheels
+        slipping); the wide match replaces it only if it puts clearly more of the scan on it.
+        """
+        cfg = self.config
+        wide = SearchWindow(cfg.window_linear[1], math.radians(cfg.sequential_wide_angular_deg))
+        far = self.loop_matcher.match(submap, self.scans[k - 1], self.scans[k], guess, wide)
+        if far.covariance is None:
+            return small
+        better = far.inlier_ratio >= small.inlier_ratio + cfg.sequential_retry_gain
+        return far if small.covariance is None or better else small
 
     def _loops(self, block: range) -> None:
         # Submaps are placed by the estimate, which moves when loops close: built per block.
