@@ -200,19 +200,27 @@ class FrontEnd:
     def _wider(
         self, submap: Submap, k: int, guess: NDArray[np.float64], small: MatchResult
     ) -> MatchResult:
-        """Keyframe k matched again over the wide window around the odometry's step.
+        """Keyframe k matched again over the wide window, around the odometry's step and
+        around standing still.
 
         A small-window match that leaves most of the scan off the keyframe before it means
         the odometry's step is off by more than the small window (kiss-icp lost, wheels
-        slipping); the wide match replaces it only if it puts clearly more of the scan on it.
+        slipping). A lost odometry can be off by more than the wide window too (kiss-icp
+        carrying a wrong speed down a corridor), but the robot itself rarely moves more than
+        the wide window between keyframes, so the window around standing still holds the
+        true step whatever the odometry says. The better of the two replaces the small match
+        only if it is a good match itself and puts clearly more of the scan on the keyframe.
         """
         cfg = self.config
         wide = SearchWindow(cfg.window_linear[1], math.radians(cfg.sequential_wide_angular_deg))
-        far = self.loop_matcher.match(submap, self.scans[k - 1], self.scans[k], guess, wide)
-        if far.covariance is None:
-            return small
-        better = far.inlier_ratio >= small.inlier_ratio + cfg.sequential_retry_gain
-        return far if small.covariance is None or better else small
+        best = small if small.covariance is not None else None
+        for centre in (guess, np.zeros(3)):
+            far = self.loop_matcher.match(submap, self.scans[k - 1], self.scans[k], centre, wide)
+            if far.covariance is None or far.inlier_ratio < cfg.sequential_retry_below:
+                continue
+            if best is None or far.inlier_ratio >= best.inlier_ratio + cfg.sequential_retry_gain:
+                best = far
+        return best if best is not None else small
 
     def _loops(self, block: range) -> None:
         # Submaps are placed by the estimate, which moves when loops close: built per block.

@@ -42,9 +42,9 @@ class Recovery:
     """How a wheel-less kiss-icp step is searched again.
 
     Attributes:
-        linear: Half-width of the search in x and y around kiss-icp's step, metres. kiss-icp,
-            once lost, stays near its constant-velocity prediction, so the window must hold
-            the difference of two consecutive steps; the widest loop window (3 m).
+        linear: Half-width of the search in x and y around the previous scan, metres: the
+            widest loop window (3 m); a log with scans farther apart is not one a scan
+            matcher can follow without wheels.
         angular_deg: …in heading, degrees. A 180° scanner turned by more than 90° keeps less
             than half of its view, too little to match, so wider would only add false poses.
         gain: The search's step replaces kiss-icp's only if its correlative score (mean
@@ -118,7 +118,9 @@ def _recover(
     # bound prunes nearly everything at the coarse levels.
     window = SearchWindow(recovery.linear, math.radians(recovery.angular_deg))
     turn = angular_step(np.array([[recovery.step_range, 0.0]]), submap.resolution)
-    hit = branch_and_bound(submap, pts, step, window, step=turn, min_score=bar)
+    # Around standing still, not around kiss-icp's step: once lost, kiss-icp may carry a wrong
+    # speed further than any window, but a scan is rarely more than the window from the last.
+    hit = branch_and_bound(submap, pts, np.zeros(3), window, step=turn, min_score=bar)
     if hit is None:
         return
     found = refine(
