@@ -38,12 +38,13 @@ def office(tmp_path_factory) -> Path:
     return simulate(SimConfig(preset="office", seed=4, num_beams=181, laps=0.4), folder)
 
 
-def _step_errors(scans, truth, odometry, config):
+def _sequential(scans, truth, odometry, config):
+    """(metres, radians) off the true step, and kept, of every sequential edge."""
     front = FrontEnd(
         scans,
         odometry,
         ScanMatcher(),
-        EdgeValidator(ValidationConfig(validator="none"), scans),
+        EdgeValidator(ValidationConfig(validator="reference"), scans, truth),
         config,
         GraphConfig(),
     )
@@ -52,7 +53,7 @@ def _step_errors(scans, truth, odometry, config):
     for e in edges:
         err = se2.between(se2.between(truth[e.a], truth[e.b]), e.estimate)
         out.append((math.hypot(err[0], err[1]), abs(err[2])))
-    return np.array(out)
+    return np.array(out), np.array([e.kept for e in edges])
 
 
 def test_sequential_edges_are_found_where_the_odometry_jumps(office):
@@ -69,16 +70,16 @@ def test_sequential_edges_are_found_where_the_odometry_jumps(office):
         odometry[k + 1] = se2.compose(odometry[k], step)
 
     config = FrontEndConfig(loop_min_gap=1000)
-    errors = _step_errors(scans, truth, odometry, config)
+    errors, kept = _sequential(scans, truth, odometry, config)
     wrong = (errors[:, 0] > 0.05) | (errors[:, 1] > math.radians(1.0))
     assert jumped.sum() >= 8
-    assert not wrong.any(), np.flatnonzero(wrong)
+    assert kept.all() and not wrong.any(), np.flatnonzero(wrong | ~kept)
 
-    # Without the second search the jumped steps stay where the odometry put them.
-    never = dataclasses.replace(config, sequential_retry_below=0.0)
-    errors = _step_errors(scans, truth, odometry, never)
-    wrong = (errors[:, 0] > 0.2) | (errors[:, 1] > math.radians(3.0))
-    assert wrong[jumped].mean() > 0.5
+    # Without the second search the validator rejects the jumped steps: the graph gets the
+    # odometry's wrong step there.
+    never = dataclasses.replace(config, sequential_retry=False)
+    errors, kept = _sequential(scans, truth, odometry, never)
+    assert kept[~jumped].all() and (~kept[jumped]).mean() > 0.5
 
 
 def test_wheel_less_odometry_over_sparse_scans_follows_the_robot(tmp_path):
