@@ -217,9 +217,20 @@ class FrontEnd:
         if not retried:
             return
         self.validate([r for _, r in retried])
-        for i, r in retried:
-            if r.kept:
-                edges[i] = r
+        kept = {i: r for i, r in retried if r.kept}
+        # Where the odometry is wrong at one keyframe only (a scan stamped mid-turn), its
+        # error cancels over the two steps that keyframe joins; a matched step next to an
+        # odometry step would keep it. So a wide match goes in only between matched steps.
+        while lone := [i for i in kept if not self._matched_around(i, edges, kept)]:
+            for i in lone:
+                del kept[i]
+        for i, r in kept.items():
+            edges[i] = r
+
+    @staticmethod
+    def _matched_around(i: int, edges: list[SlamEdge], kept: dict[int, SlamEdge]) -> bool:
+        """Both neighbours of sequential edge i (in its block) are kept or being kept."""
+        return all(edges[j].kept or j in kept for j in (i - 1, i + 1) if 0 <= j < len(edges))
 
     def _wider(
         self, submap: Submap, k: int, guess: NDArray[np.float64], small: MatchResult
