@@ -102,6 +102,9 @@ def test_window_search_widens_after_a_long_corridor_and_gates_by_mahalanobis():
     assert found and all(c.source == "window" for c in found)
     assert {c.a for c in found} <= set(range(0, 12))
     assert all(c.linear == config.window_linear[1] for c in found)
+    # Clamped smaller than the drift: the window may miss the place, so place recognition
+    # is asked too (``covers`` is what the front end reads).
+    assert not any(c.covers for c in found)
     # A scan matcher's heading drift over 200 m is about a degree: the narrowest turn.
     assert all(
         c.angular == pytest.approx(math.radians(config.window_angular_deg[0])) for c in found
@@ -113,6 +116,7 @@ def test_window_search_widens_after_a_long_corridor_and_gates_by_mahalanobis():
     graph.add(GraphEdge(0, count - 1, se2.between(poses[0], poses[-1]), LOOP_COV))
     tight = window_candidates(block, poses, graph, config)
     assert tight and all(c.linear == config.window_linear[0] for c in tight)
+    assert all(c.covers for c in tight)
     far = poses.copy()
     far[count - 5 :, 1] += 6.0
     assert window_candidates(block, far, graph, config) == []
@@ -165,3 +169,30 @@ def test_a_group_of_agreeing_loops_outvotes_a_drifted_estimate(weight):
     ]
     flags = consistent(loops, estimate, graph, ConsistencyConfig(estimate_weight=weight))
     assert flags.all()
+
+
+def test_a_loop_that_moves_the_map_past_the_drift_needs_a_group_that_agrees():
+    truth = ring()
+    wide = chain(truth, LOOP_COV * 25)  # the graph's floors: it would let either through
+    drift = chain(truth, STEP_COV)  # the scan matchers' drift: 1.5 m is a surprise
+    estimate = truth.copy()
+    estimate[60:, :2] += 1.5
+    loops = [
+        Loop(a, a + 90, se2.between(truth[a], truth[a + 90]), LOOP_COV) for a in range(0, 8, 2)
+    ]
+    config = ConsistencyConfig(min_support=2)
+    # One convincing match alone: an alias as far as the check can tell.
+    assert not consistent(loops[:1], estimate, wide, config, drift=drift)[0]
+    assert not consistent(loops[:2], estimate, wide, config, drift=drift).any()
+    # Three or more that agree: a revisit after drift, kept.
+    assert consistent(loops[:3], estimate, wide, config, drift=drift).all()
+    assert consistent(loops, estimate, wide, config, drift=drift).all()
+    # Without the drift view, or with no support asked, one is enough.
+    assert consistent(loops[:1], estimate, wide, config)[0]
+    no_support = ConsistencyConfig(min_support=0)
+    assert consistent(loops[:1], estimate, wide, no_support, drift=drift)[0]
+    # A loop the drift explains needs no support, unless place recognition proposed it.
+    assert consistent(loops[:1], truth, wide, config, drift=drift)[0]
+    place = [Loop(x.a, x.b, x.measurement, x.covariance, place=True) for x in loops]
+    assert not consistent(place[:1], truth, wide, config, drift=drift)[0]
+    assert consistent(place[:3], truth, wide, config, drift=drift).all()

@@ -18,7 +18,7 @@ from vgm_studio.datasets import open_log
 from vgm_studio.recording import write_recording
 from vgm_studio.simulation.simulate import SimConfig, simulate
 from vgm_studio.slam.config import FrontEndConfig, SlamConfig, ValidationConfig
-from vgm_studio.slam.pipeline import dense_reference, run_slam
+from vgm_studio.slam.pipeline import dense_reference, run_slam, scan_poses
 from vgm_studio.slam.report import errors_of, run_maps
 from vgm_studio.slam.scoring import relations_from_reference
 from vgm_studio.tools import cmd
@@ -170,3 +170,21 @@ def test_a_corrected_log_scores_against_its_corrected_poses_however_it_is_read(d
     assert docs["auto"]["after"] == docs["same-reference"]["after"]
     # Read as odometry, the corrected poses drive the run, so its odometry is near exact.
     assert docs["poses-odometry"]["odometry"]["trans_mean"] < docs["auto"]["odometry"]["trans_mean"]
+
+
+def test_scans_between_keyframes_share_both_keyframes_corrections():
+    # Odometry that drifts sideways 1 cm per scan over a straight 2 m run; the keyframes
+    # (every tenth scan) are put back on the true line.
+    steps = np.arange(21, dtype=np.float64)
+    truth = np.column_stack([0.1 * steps, np.zeros(21), np.zeros(21)])
+    odometry = truth + np.column_stack([np.zeros(21), 0.01 * steps, np.zeros(21)])
+    keyframes = np.array([0, 10, 20])
+    poses = scan_poses(truth[keyframes], keyframes, odometry)
+    # Keyframes stay where the graph put them; scans between lie on the line, not carrying
+    # the drift since their keyframe (up to 9 cm with the odometry alone).
+    np.testing.assert_allclose(poses[keyframes], truth[keyframes], atol=1e-12)
+    np.testing.assert_allclose(poses, truth, atol=1e-9)
+    # Past the last keyframe its correction alone; before the first, the first's.
+    longer = np.vstack([odometry, [[2.1, 0.21, 0.0]]])
+    tail = scan_poses(truth[keyframes], keyframes, longer)[-1]
+    np.testing.assert_allclose(tail, [2.1, 0.01, 0.0], atol=1e-9)

@@ -99,9 +99,18 @@ class LoopMatcher:
         self._targets.pop(id(scan), None)
 
     def search(
-        self, submap: Submap, scan: Scan, guess: NDArray[np.float64], window: SearchWindow
+        self,
+        submap: Submap,
+        scan: Scan,
+        guess: NDArray[np.float64],
+        window: SearchWindow,
+        min_score: float | None = None,
     ) -> Hit | None:
-        """The correlative step alone: the best grid pose of ``scan`` within the window."""
+        """The correlative step alone: the best grid pose of ``scan`` within the window.
+
+        ``min_score`` overrides the config's for this search (the matcher is shared by
+        threads, so it is passed, never set).
+        """
         pts = thin_points(self.points(scan), self.config.thin)
         return branch_and_bound(
             submap,
@@ -109,7 +118,7 @@ class LoopMatcher:
             np.asarray(guess, np.float64),
             window,
             step=self.config.angular_step,
-            min_score=self.config.min_score,
+            min_score=self.config.min_score if min_score is None else min_score,
         )
 
     def match(
@@ -119,8 +128,11 @@ class LoopMatcher:
         scan: Scan,
         guess: NDArray[np.float64],
         window: SearchWindow,
+        min_score: float | None = None,
     ) -> MatchResult:
         """Estimates the pose of ``scan`` in the submap's frame (the target keyframe's).
+
+        Safe to call from several threads at once: the heavy numpy work releases the GIL.
 
         Args:
             submap: The grid around the target, in the target keyframe's frame.
@@ -128,10 +140,11 @@ class LoopMatcher:
             scan: The scan to place.
             guess: Where the estimate puts ``scan`` in the submap frame; the window's centre.
             window: How far from the guess to search.
+            min_score: Overrides ``config.min_score`` for this match.
         """
         guess = np.asarray(guess, dtype=np.float64)
         pts = self.points(scan)
-        hit = self.search(submap, scan, guess, window) if len(pts) >= 3 else None
+        hit = self.search(submap, scan, guess, window, min_score) if len(pts) >= 3 else None
         tgt = self._target(target)
         if hit is None or tgt is None:
             return MatchResult(guess, 0, False, 0.0, float("inf"), None, guess)

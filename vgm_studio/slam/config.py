@@ -79,6 +79,8 @@ class FrontEndConfig:
         false_loop_distance: How far apart the keyframes of an injected loop are at least, in
             the odometry estimate, metres.
         seed: Seeds the injected loops.
+        threads: Threads that match a block's loops at once (0: ``OMP_NUM_THREADS`` where
+            set, else the CPUs this process may use, at most 4). Results do not depend on it.
     """
 
     keyframe_distance: float = 0.5
@@ -106,6 +108,7 @@ class FrontEndConfig:
     false_loops: int = 0
     false_loop_distance: float = 5.0
     seed: int = 0
+    threads: int = 0
 
 
 @dataclass(frozen=True)
@@ -147,11 +150,17 @@ class ConsistencyConfig:
             covariance is the graph's own (wide) one, so by default it vetoes what the graph
             is sure of: a group of aliased loops (a corridor matched one door along, a
             symmetric hall matched to its mirror) agrees with itself and would outvote it.
+        min_support: A loop that moves the map by more than the scan matchers drift, or one
+            from place recognition, is kept only in a group of more than this many agreeing
+            loops (0: alone too). A revisit
+            after long drift yields a run of loops from consecutive keyframes; one convincing
+            alias in a corridor yields one.
     """
 
     enabled: bool = True
     probability: float = 0.99
     estimate_weight: int = 1000
+    min_support: int = 2
 
 
 @dataclass(frozen=True)

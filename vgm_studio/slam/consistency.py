@@ -14,6 +14,13 @@ group, tested against each loop the same way (the cycle a→b through the loop a
 the graph) and weighted as a few loops: where the graph is sure where b lies relative to a,
 a loop that disagrees is rejected even when it is the only one; where it is not sure, a few
 loops that agree with one another outvote it.
+
+A loop that moves the map by more than the scan matchers can have drifted (judged with the
+drift's narrower covariance), and any loop from place recognition, is a surprise; a long
+corridor or a row of identical rooms can produce one convincing but wrong match, so a surprise
+is kept only in a group of more than ``min_support`` agreeing loops: the temporal-consistency
+check of place recognition systems (e.g. ORB-SLAM's three consecutive consistent loop
+candidates, Mur-Artal et al. 2015).
 """
 
 from __future__ import annotations
@@ -41,6 +48,8 @@ class Loop:
     b: int
     measurement: NDArray[np.float64]
     covariance: NDArray[np.float64]
+    place: bool = False
+    """Proposed by place recognition, which the estimate never backed."""
 
 
 def consistent(
@@ -48,6 +57,7 @@ def consistent(
     poses: NDArray[np.float64],
     graph: UncertaintyGraph,
     config: ConsistencyConfig | None = None,
+    drift: UncertaintyGraph | None = None,
 ) -> NDArray[np.bool_]:
     """Which loops belong to the largest mutually consistent group (with the estimate).
 
@@ -55,7 +65,10 @@ def consistent(
         loops: Loops the validator kept, not yet in the graph.
         poses: (K, 3) the running estimate.
         graph: The edges already in the graph, for the chains' covariances.
-        config: Gate and vote.
+        config: Gate, vote and support.
+        drift: The edges as the scan matcher's drift sees them (narrower than the graph's
+            floors). A loop that this view of the estimate cannot explain moves the map by
+            more than the matchers drift: it needs ``config.min_support`` agreeing loops.
     """
     config = config or ConsistencyConfig()
     if not loops:
@@ -74,8 +87,28 @@ def consistent(
             if _cycle(loops[i], loops[j], poses, rel) <= gate:
                 votes.add_edge(i, j)
     clique, _ = nx.max_weight_clique(votes, weight="weight")
-    members = set(clique)
+    members = {i for i in clique if i != _ESTIMATE}
+    if drift is not None and len(members) <= config.min_support:
+        members -= _surprises(loops, members, poses, drift, gate)
     return np.array([i in members for i in range(len(loops))], dtype=bool)
+
+
+def _surprises(
+    loops: Sequence[Loop],
+    members: set[int],
+    poses: NDArray[np.float64],
+    drift: UncertaintyGraph,
+    gate: float,
+) -> set[int]:
+    """The members that the estimate, with the scan matcher's drift, cannot explain, and
+    those from place recognition (however wide the drift, the estimate never backed them)."""
+    ends = sorted({loops[i].a for i in members})
+    rel = dict(zip(ends, drift.relative(ends, len(poses)), strict=True))
+    return {
+        i
+        for i in members
+        if loops[i].place or _fits_estimate(loops[i], poses, rel[loops[i].a]) > gate
+    }
 
 
 def _variances(cov: NDArray[np.float64]) -> tuple[float, float]:

@@ -13,9 +13,11 @@ next block.
 
 from __future__ import annotations
 
-import dataclasses
 import math
+import os
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,6 +38,7 @@ from vgm_studio.slam.loop_search import Candidate, place_candidates, window_cand
 from vgm_studio.slam.uncertainty import UncertaintyGraph
 
 Validate = Callable[[Sequence[SlamEdge]], None]
+_T = TypeVar("_T")
 
 
 def graph_edge(edge: SlamEdge, config: GraphConfig) -> GraphEdge:
@@ -54,6 +57,15 @@ def odometry_edge(a: int, b: int, odometry: NDArray[np.float64], config: GraphCo
     delta = se2.between(odometry[a], odometry[b])
     cov = edge_covariance(None, config, distance=float(math.hypot(delta[0], delta[1])))
     return GraphEdge(a, b, delta, cov, known_inlier=True)
+
+
+def match_threads() -> int:
+    """Threads for loop matching: ``OMP_NUM_THREADS`` where set (a Ray worker holding one
+    CPU gets 1), else the CPUs this process may run on, at most 4."""
+    named = os.environ.get("OMP_NUM_THREADS", "")
+    if named.isdigit() and int(named) > 0:
+        return int(named)
+    return max(1, min(4, len(os.sched_getaffinity(0))))
 
 
 def false_loop_pairs(odometry: NDArray[np.float64], config: FrontEndConfig) -> dict[int, list[int]]:
@@ -114,6 +126,8 @@ class FrontEnd:
         self.loop_matcher = LoopMatcher(CorrelativeConfig(min_score=config.loop_min_score))
         self._submaps: dict[tuple[int, int, int], Submap] = {}
         self._sequential_submaps: dict[int, Submap] = {}
+        self._threads = config.threads or match_threads()
+        self._pool: ThreadPoolExecutor | None = None
         self.estimate = RunningEstimate(odometry[0], graph)
         self.edges: list[SlamEdge] = []
         self._false = false_loop_pairs(odometry, config) if config.false_loops else {}
@@ -126,17 +140,24 @@ class FrontEnd:
             total=count, desc="front end", unit="keyframe", disable=None if progress else True
         )
         bar.update(1)
-        for start in range(1, count, self.config.block):
-            block = range(start, min(start + self.config.block, count))
-            self._sequential(block)
-            self._loops(block)
-            bar.update(len(block))
-            bar.set_postfix(
-                loops=sum(e.kind == "loop" for e in self.edges),
-                kept=sum(e.kind == "loop" and e.kept for e in self.edges),
-            )
+        with ThreadPoolExecutor(self._threads, thread_name_prefix="loops") as self._pool:
+            for start in range(1, count, self.config.block):
+                block = range(start, min(start + self.config.block, count))
+                self._sequential(block)
+                self._loops(block)
+                bar.update(len(block))
+                bar.set_postfix(
+                    loops=sum(e.kind == "loop" for e in self.edges),
+                    kept=sum(e.kind == "loop" and e.kept for e in self.edges),
+                )
+        self._pool = None
         bar.close()
         return self.edges
+
+    def _map(self, fn: Callable[[Candidate], _T], items: Sequence[Candidate]) -> list[_T]:
+        if self._pool is None or len(items) < 2:
+            return [fn(c) for c in items]
+        return list(self._pool.map(fn, items))
 
     def _match(
         self,
@@ -261,13 +282,18 @@ class FrontEnd:
         self._submaps.clear()
         poses = self.estimate.poses
         candidates = window_candidates(block, poses, self._uncertainty, self.config)
-        # Place recognition where the window search has nothing to offer: a revisit the
-        # estimate has lost track of (and it spares the matcher many wide searches).
-        searched = {c.b for c in candidates}
+        # Place recognition where the window search cannot be trusted to hold the place: no
+        # candidate, or a window clamped smaller than the drift (a revisit the estimate has
+        # lost track of). Where the window covers the drift it spares many wide searches.
+        searched = {c.b for c in candidates if c.covers}
         lost = [b for b in block if b not in searched]
         candidates += place_candidates(lost, self._places, self.scans, self.config)
         candidates += self._injected(block)
-        edges = [self._match_loop(c) for c in candidates]
+        # Submaps first (shared by candidates), then the matches, both on every thread: the
+        # searches are numpy gathers that release the GIL, and each match is independent.
+        unique = {self._submap_key(c.a, c.b): c for c in candidates}
+        self._map(lambda c: self._submap(c.a, c.b), list(unique.values()))
+        edges = self._map(self._match_loop, candidates)
         self.validate(edges)
         for e in edges:
             # A failed match returns its guess: no measurement, whatever a validator says.
@@ -311,23 +337,21 @@ class FrontEnd:
             # Scores are at most 1: past that bar the wide window cannot win, and below it
             # branch and bound may drop every pose that would not (same answer, less work).
             if bar < 1.0:
-                matcher = self.loop_matcher
-                base = matcher.config
-                matcher.config = dataclasses.replace(base, min_score=max(base.min_score, bar))
-                try:
-                    far = matcher.match(submap, target, scan, c.guess, wide)
-                finally:
-                    matcher.config = base
+                floor = max(self.loop_matcher.config.min_score, bar)
+                far = self.loop_matcher.match(submap, target, scan, c.guess, wide, floor)
                 if (far.score or 0.0) > bar:
                     result = far
         return SlamEdge("loop", c.a, c.b, c.guess, result, c.source == "injected", source=c.source)
 
-    def _submap(self, a: int, b: int) -> Submap:
+    def _submap_key(self, a: int, b: int) -> tuple[int, int, int]:
         # Keyframes near b would match b trivially; the submap stays well before it.
         last = max(a, min(a + self.config.submap_keyframes, b - self.config.loop_min_gap))
-        members = range(max(0, a - self.config.submap_keyframes), last + 1)
-        key = (a, members.start, members.stop)
+        return (a, max(0, a - self.config.submap_keyframes), last + 1)
+
+    def _submap(self, a: int, b: int) -> Submap:
+        key = self._submap_key(a, b)
         if key not in self._submaps:
+            members = range(key[1], key[2])
             poses = se2.between(self.estimate.poses[a], self.estimate.poses[members])
             self._submaps[key] = Submap.from_scans([self.scans[k] for k in members], poses)
         return self._submaps[key]
@@ -335,8 +359,13 @@ class FrontEnd:
     def _check_consistency(self, loops: list[SlamEdge], poses: NDArray[np.float64]) -> None:
         if not self.consistency.enabled or not loops:
             return
-        checked = [Loop(e.a, e.b, e.estimate, graph_edge(e, self.graph).covariance) for e in loops]
-        flags = consistent(checked, poses, self._graph_uncertainty, self.consistency)
+        checked = [
+            Loop(e.a, e.b, e.estimate, graph_edge(e, self.graph).covariance, e.source == "place")
+            for e in loops
+        ]
+        flags = consistent(
+            checked, poses, self._graph_uncertainty, self.consistency, drift=self._uncertainty
+        )
         for e, ok in zip(loops, flags, strict=True):
             e.consistency = "kept" if ok else "rejected"
             e.kept = bool(ok)

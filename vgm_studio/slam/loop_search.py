@@ -9,10 +9,11 @@ the graph is sure the search is the old fixed radius, and 200 m of unclosed corr
 spans metres. The nearest candidates by that distance are matched over a search window of
 three σ, clamped.
 
-Place: the keyframe's scan descriptor (a Scan Context for 2D lasers, Kim and Kim 2018) against
-those of all earlier keyframes (a KD-tree of rotation-invariant ring keys, re-ranked by the
-column-shift distance; see ``matching.descriptor``); the estimate is not consulted, so a
-revisit is proposed even tens of metres off. Its window is centred on the descriptor's yaw.
+Place: wherever the window cannot cover three σ (the drift outgrew the widest window) or
+finds nothing, the keyframe's scan descriptor (a Scan Context for 2D lasers, Kim and Kim 2018)
+against those of all earlier keyframes (a KD-tree of rotation-invariant ring keys, re-ranked
+by the column-shift distance; see ``matching.descriptor``); the estimate is not consulted, so
+a revisit is proposed even tens of metres off. Its window is centred on the descriptor's yaw.
 """
 
 from __future__ import annotations
@@ -40,6 +41,9 @@ class Candidate:
     Attributes:
         linear: Half-width of the search window in x and y, metres.
         angular: Half-width in heading, radians.
+        covers: The window spans three σ of where b may be relative to a. A window clamped
+            smaller (the graph has drifted farther than a search can afford) may miss the
+            place, so place recognition looks too.
     """
 
     a: int
@@ -48,6 +52,7 @@ class Candidate:
     guess: NDArray[np.float64]
     linear: float
     angular: float
+    covers: bool = True
 
 
 def _clamp(value: float, bounds: tuple[float, float]) -> float:
@@ -88,17 +93,14 @@ def _window_of(
     ok = np.isfinite(m2) & (m2 <= gate) & (np.abs(offset[:, 2]) <= turn)
     chosen = olds[ok][np.argsort(m2[ok], kind="stable")][: config.loops_per_keyframe]
     lo_deg, hi_deg = config.window_angular_deg
-    return [
-        Candidate(
-            int(a),
-            b,
-            "window",
-            offset[a],
-            _clamp(3.0 * math.sqrt(position_var[a]), config.window_linear),
-            math.radians(_clamp(3.0 * math.degrees(heading_sigma[a]), (lo_deg, hi_deg))),
-        )
-        for a in chosen
-    ]
+    out = []
+    for a in chosen:
+        reach, turn_deg = 3.0 * math.sqrt(position_var[a]), 3.0 * math.degrees(heading_sigma[a])
+        linear = _clamp(reach, config.window_linear)
+        angular = _clamp(turn_deg, (lo_deg, hi_deg))
+        covers = reach <= linear and turn_deg <= angular
+        out.append(Candidate(int(a), b, "window", offset[a], linear, math.radians(angular), covers))
+    return out
 
 
 def place_candidates(

@@ -52,7 +52,7 @@ class SlamResult:
         return self.odometry[self.keyframes]
 
     def scan_poses(self, keyframe_poses: NDArray[np.float64]) -> NDArray[np.float64]:
-        """(N, 3) poses of every scan: its keyframe's pose, then odometry from there on."""
+        """(N, 3) poses of every scan, carried from the keyframes by the odometry."""
         return scan_poses(keyframe_poses, self.keyframes, self.odometry)
 
     @property
@@ -63,14 +63,35 @@ class SlamResult:
 def scan_poses(
     keyframe_poses: NDArray[np.float64], keyframes: NDArray[np.int64], odometry: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """Carries keyframe poses to every scan with the odometry since its keyframe.
+    """Carries keyframe poses to every scan with the odometry, spreading the correction.
 
-    Scans before the first keyframe hang off it backwards.
+    Each keyframe's correction (the transform that takes its odometry pose to its estimated
+    one) is blended into the scans after it, towards the next keyframe's correction in
+    proportion to the odometry travelled, so a scan between two keyframes moves with both
+    rather than carrying all the odometry's error since the first. Scans before the first
+    keyframe and after the last take its correction alone.
     """
-    owner = np.searchsorted(keyframes, np.arange(len(odometry)), side="right") - 1
+    count = len(odometry)
+    owner = np.searchsorted(keyframes, np.arange(count), side="right") - 1
     owner = np.maximum(owner, 0)
-    kf_scan = keyframes[owner]
-    return se2.compose(keyframe_poses[owner], se2.between(odometry[kf_scan], odometry))
+    nxt = np.minimum(owner + 1, len(keyframes) - 1)
+    corrections = se2.compose(keyframe_poses, se2.inverse(odometry[keyframes]))
+    here = se2.compose(corrections[owner], odometry)
+    there = se2.compose(corrections[nxt], odometry)
+    # The share of the way from one keyframe to the next: by odometry travelled (drift grows
+    # with it), by scan count where the robot only turned.
+    travelled = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(odometry[:, :2], axis=0).T))])
+    index = np.arange(count, dtype=np.float64)
+    share = []
+    for axis in (travelled, index):
+        span = axis[keyframes[nxt]] - axis[keyframes[owner]]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            share.append(np.where(span > 1e-6, (axis - axis[keyframes[owner]]) / span, np.nan))
+    t = np.clip(np.nan_to_num(np.where(np.isnan(share[0]), share[1], share[0])), 0.0, 1.0)
+    turn = se2.wrap_angle(there[:, 2] - here[:, 2])
+    out = here + t[:, None] * (there - here)
+    out[:, 2] = se2.wrap_angle(here[:, 2] + t * turn)
+    return out
 
 
 def dense_reference(log: ScanLog, odometry: NDArray[np.float64]) -> NDArray[np.float64] | None:
