@@ -24,6 +24,7 @@ from vgm_studio.labels.records import NewVersion
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.matching.edges import Edge, read_edges
 from vgm_studio.model import Validator
+from vgm_studio.model.checkpoint import load_checkpoint
 from vgm_studio.tools import trainer_cmds
 from vgm_studio.trainer import PromotionWatcher, registry
 from vgm_studio.trainer.dataset import held_out_split, majority_labels
@@ -128,6 +129,10 @@ def test_models_lists_versions_and_exports_a_checkpoint_eval_accepts(trained, tm
     validator = Validator.load(out, device="cpu")
     p = validator.predict(edges[:8])
     assert p.shape == (8,)
+    # A version keeps its held-out precision curve, so --loop-precision can use it.
+    exported = load_checkpoint(out)
+    assert exported.curve is not None and len(exported.curve.thresholds) >= 2
+    assert exported.curve.recall[0] == 1.0
     missing = runner.invoke(app, ["--workspace", str(trained), "--export", "9", "--out", str(out)])
     assert missing.exit_code == 1 and "no version v9" in str(missing.exception)
 

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from vgm_studio.model.checkpoint import Checkpoint
 from vgm_studio.model.features import PairSample
 from vgm_studio.model.fitting import EpochHook, Recipe, Rows, fit_network
+from vgm_studio.model.operating import PrecisionCurve, precision_curve
 from vgm_studio.model.registry import MODELS, build_network
 from vgm_studio.model.validator import input_spec
 from vgm_studio.vgm.grid import VGMParams
@@ -77,6 +78,7 @@ class FitResult:
     held_out_p: NDArray[np.float64]
     history: list[dict[str, float]]
     warm_start: bool
+    curve: PrecisionCurve | None = None
 
 
 def fit(
@@ -122,6 +124,8 @@ def fit(
         held_out_p=fitted.val_p,
         history=fitted.history,
         warm_start=warm,
+        # Kept so that a version can serve ``--loop-precision`` like a trained checkpoint.
+        curve=precision_curve(labels[held_idx], fitted.val_p) if len(held_idx) else None,
     )
 
 
@@ -136,6 +140,7 @@ def payload(result: FitResult, config: FitConfig, training: dict[str, Any]) -> C
         training={**training, "config": {k: v for k, v in asdict(config).items() if k != "vgm"}},
         state_dict=result.state_dict,
         history=result.history,
+        curve=result.curve,
     )
 
 
