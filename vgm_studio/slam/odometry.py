@@ -29,7 +29,12 @@ from tqdm import tqdm
 
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
-from vgm_studio.matching.branch_bound import SearchWindow, angular_step, branch_and_bound
+from vgm_studio.matching.branch_bound import (
+    SearchWindow,
+    angular_step,
+    branch_and_bound,
+    thin_points,
+)
 from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.odometry import kiss_config
 from vgm_studio.matching.refinement import refine
@@ -110,7 +115,10 @@ def _recover(
     map from the two scans if the search found a clearly better step."""
     step = se2.between(last, se2.from_matrix(pipeline.last_pose))
     submap = Submap.from_points(previous, normal_neighbors=config.normal_neighbors)
-    here = branch_and_bound(submap, pts, step, SearchWindow(0.0, 0.0))
+    # Near the sensor a laser puts several points in a cell: one per two cells scores alike
+    # for a third less time (the refinement below uses them all).
+    coarse = thin_points(pts, 2 * submap.resolution)
+    here = branch_and_bound(submap, coarse, step, SearchWindow(0.0, 0.0))
     bar = (1.0 + recovery.gain) * (here.score if here is not None else 0.0)
     if bar >= 1.0:
         return
@@ -120,7 +128,7 @@ def _recover(
     turn = angular_step(np.array([[recovery.step_range, 0.0]]), submap.resolution)
     # Around standing still, not around kiss-icp's step: once lost, kiss-icp may carry a wrong
     # speed further than any window, but a scan is rarely more than the window from the last.
-    hit = branch_and_bound(submap, pts, np.zeros(3), window, step=turn, min_score=bar)
+    hit = branch_and_bound(submap, coarse, np.zeros(3), window, step=turn, min_score=bar)
     if hit is None:
         return
     found = refine(
