@@ -60,6 +60,17 @@ class FrontEndConfig:
             0 matches scan to scan (kiss-icp from odometry, then refinement). The submap
             measured better: Intel 0.0290 m against 0.0301 m, simulated office 0.0165 m
             against 0.0186 m, for ~8% more time.
+        sequential_retry: A sequential match the validator rejected is matched again over the
+            wide window (around the odometry's step and around standing still) and replaced
+            by a wide match the validator keeps. Only with ``sequential_submap``.
+        sequential_wide_angular_deg: Half-width in heading of that wide window, degrees (in
+            x and y it is the widest loop window). A 180° scanner turned by more than 90°
+            keeps less than half of its view, too little to match; keyframes are at most
+            ``keyframe_angle_deg`` apart by odometry, but a lost odometry can miss any turn.
+        sequential_retry_gain: …and a wide match is only tried on the validator if it puts
+            this much more of the scan (inlier share) on the keyframe before it than the
+            rejected one: along a corridor the wide window holds poses that fit nearly as
+            well as the right one.
         submap_keyframes: A loop is matched against a submap of its target keyframe and this
             many keyframes on each side of it.
         loop_min_gap: …and at least this many keyframes earlier.
@@ -92,6 +103,9 @@ class FrontEndConfig:
     prefer_estimate: float = 0.1
     loop_min_score: float = 0.3
     sequential_submap: int = 5
+    sequential_retry: bool = True
+    sequential_wide_angular_deg: float = 90.0
+    sequential_retry_gain: float = 0.1
     submap_keyframes: int = 5
     loop_min_gap: int = 20
     loops_per_keyframe: int = 2

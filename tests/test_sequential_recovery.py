@@ -1,0 +1,101 @@
+"""Sequential edges and odometry that survive a lost motion estimate.
+
+A simulated office whose odometry jumps by a metre and tens of degrees on some steps (far
+outside the smallest loop window): the sequential matcher must still find every step, which
+it does only by searching again over the wide window. A wheel-less log with scans a metre
+apart must give kiss-icp odometry that follows the robot, which it does only when a lost
+step is searched again by the correlative matcher.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vgm_studio.core import se2
+from vgm_studio.datasets import open_log
+from vgm_studio.graph.config import GraphConfig
+from vgm_studio.matching.candidates import select_keyframes
+from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.simulation.simulate import SimConfig, simulate
+from vgm_studio.slam.config import FrontEndConfig, ValidationConfig
+from vgm_studio.slam.frontend import FrontEnd
+from vgm_studio.slam.odometry import Recovery, scan_odometry
+from vgm_studio.slam.validation import EdgeValidator
+
+# Every JUMP-th step of the odometry is off by this (x, y metres, θ radians).
+JUMP = 7
+OFFSET = np.array([1.4, -1.0, math.radians(50.0)])
+
+
+@pytest.fixture(scope="module")
+def office(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("office")
+    return simulate(SimConfig(preset="office", seed=4, num_beams=181, laps=0.4), folder)
+
+
+def _sequential(scans, truth, odometry, config):
+    """(metres, radians) off the true step, and kept, of every sequential edge."""
+    front = FrontEnd(
+        scans,
+        odometry,
+        ScanMatcher(),
+        EdgeValidator(ValidationConfig(validator="reference"), scans, truth),
+        config,
+        GraphConfig(),
+    )
+    edges = [e for e in front.run(progress=False) if e.kind == "sequential"]
+    out = []
+    for e in edges:
+        err = se2.between(se2.between(truth[e.a], truth[e.b]), e.estimate)
+        out.append((math.hypot(err[0], err[1]), abs(err[2])))
+    return np.array(out), np.array([e.kept for e in edges])
+
+
+def test_sequential_edges_are_found_where_the_odometry_jumps(office):
+    log = open_log(office)
+    truth_all = np.array([s.reference for s in log.scans])
+    keyframes = select_keyframes(truth_all, 0.5, 20.0)[:60]
+    scans = [log.scans[i] for i in keyframes]
+    truth = truth_all[keyframes]
+    steps = se2.between(truth[:-1], truth[1:])
+    jumped = np.arange(len(steps)) % JUMP == JUMP - 1
+    steps[jumped] = se2.compose(steps[jumped], OFFSET)
+    odometry = np.vstack([truth[:1], np.zeros((len(steps), 3))])
+    for k, step in enumerate(steps):
+        odometry[k + 1] = se2.compose(odometry[k], step)
+
+    config = FrontEndConfig(loop_min_gap=1000)
+    errors, kept = _sequential(scans, truth, odometry, config)
+    wrong = (errors[:, 0] > 0.05) | (errors[:, 1] > math.radians(1.0))
+    assert jumped.sum() >= 8
+    assert kept.all() and not wrong.any(), np.flatnonzero(wrong | ~kept)
+
+    # Without the second search the validator rejects the jumped steps: the graph gets the
+    # odometry's wrong step there.
+    never = dataclasses.replace(config, sequential_retry=False)
+    errors, kept = _sequential(scans, truth, odometry, never)
+    assert kept[~jumped].all() and (~kept[jumped]).mean() > 0.5
+
+
+def test_wheel_less_odometry_over_sparse_scans_follows_the_robot(tmp_path):
+    path = simulate(
+        SimConfig(preset="repetitive", seed=5, num_beams=181, scan_spacing=1.0, laps=0.5),
+        tmp_path,
+    )
+    scans = [dataclasses.replace(s, odometry=None) for s in open_log(path).scans]
+    truth = np.array([s.reference for s in scans])
+
+    def wrong_steps(recovery: Recovery) -> float:
+        odo = scan_odometry(scans, progress=False, recovery=recovery)
+        err = se2.between(se2.between(truth[:-1], truth[1:]), se2.between(odo[:-1], odo[1:]))
+        bad = (np.hypot(err[:, 0], err[:, 1]) > 0.1) | (np.abs(err[:, 2]) > math.radians(2.0))
+        return float(bad.mean())
+
+    assert len(scans) > 40
+    assert wrong_steps(Recovery()) < 0.05
+    assert wrong_steps(Recovery(gain=math.inf)) > 0.5
