@@ -97,8 +97,15 @@ def same_figures(row: dict[str, Any], tmp: Path) -> str:
 
 
 def _close(a: Any, b: Any) -> bool:
+    """Equal, floats to a relative 1e-6 (p(success) is float32 arithmetic whose summation
+    order follows torch's thread count: a worker runs one thread, the command two), inside
+    lists and dicts too (the per-edge records)."""
     if isinstance(a, float) and isinstance(b, float):
         return abs(a - b) <= 1e-6 * max(abs(a), abs(b), 1e-12)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_close(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_close(a[k], b[k]) for k in a)
     return bool(a == b)
 
 
