@@ -27,7 +27,7 @@ from vgm_studio.matching.branch_bound import (
 )
 from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.matcher import MatchResult
-from vgm_studio.matching.refinement import Target, refine
+from vgm_studio.matching.refinement import Target, refine_with
 from vgm_studio.matching.submap import Submap
 
 __all__ = [
@@ -151,24 +151,9 @@ class LoopMatcher:
         m = self.config.match
         estimate, iterations, converged = hit.pose, 0, True
         if self.config.refine:
-            r = refine(
-                submap.target(),
-                pts,
-                hit.pose,
-                max_iterations=m.refine_iterations,
-                max_distance=m.refine_distance,
-                inlier_distance=m.inlier_distance,
-                degeneracy=m.degeneracy,
-            )
+            r = refine_with(submap.target(), pts, hit.pose, m)
             estimate, iterations, converged = r.estimate, r.iterations, r.converged
-        fig = refine(
-            tgt,
-            pts,
-            estimate,
-            max_iterations=0,
-            max_distance=m.refine_distance,
-            inlier_distance=m.inlier_distance,
-        )
+        fig = refine_with(tgt, pts, estimate, m, iterate=False)
         step = se2.between(guess, hit.pose)
         return MatchResult(
             estimate=estimate,

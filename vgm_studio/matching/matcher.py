@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.matching.config import MatchConfig
-from vgm_studio.matching.refinement import Target, refine
+from vgm_studio.matching.refinement import Target, refine_with
 from vgm_studio.matching.registration import KissRegistration
 
 
@@ -113,24 +113,9 @@ class ScanMatcher:
         step = se2.between(guess, kiss)
         moved, turned = float(math.hypot(step[0], step[1])), float(abs(step[2]))
         if not self.config.refine:
-            r = refine(
-                pa.target,
-                pb.points,
-                kiss,
-                max_iterations=0,
-                max_distance=self.config.refine_distance,
-                inlier_distance=self.config.inlier_distance,
-            )
+            r = refine_with(pa.target, pb.points, kiss, self.config, iterate=False)
             return MatchResult(kiss, 0, True, r.inlier_ratio, r.residual, None, kiss, moved, turned)
-        r = refine(
-            pa.target,
-            pb.points,
-            kiss,
-            max_iterations=self.config.refine_iterations,
-            max_distance=self.config.refine_distance,
-            inlier_distance=self.config.inlier_distance,
-            degeneracy=self.config.degeneracy,
-        )
+        r = refine_with(pa.target, pb.points, kiss, self.config)
         return MatchResult(
             r.estimate,
             r.iterations,

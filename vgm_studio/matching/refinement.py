@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from vgm_studio.core import se2
+from vgm_studio.matching.config import MatchConfig
 
 
 @dataclass(frozen=True)
@@ -194,3 +195,23 @@ def _covariance(jac: NDArray[np.float64], sigma2: float) -> NDArray[np.float64] 
     if values[-1] <= 0.0 or values[0] <= values[-1] * 1e-15:
         return None  # singular: no covariance, as the matcher has always said
     return np.asarray(sigma2 * (vectors / values) @ vectors.T, dtype=np.float64)
+
+
+def refine_with(
+    target: Target,
+    source: NDArray[np.float64],
+    guess: NDArray[np.float64],
+    config: MatchConfig,
+    iterate: bool = True,
+) -> Refinement:
+    """``refine`` with a matcher's settings; ``iterate=False`` only judges ``guess`` (its
+    inliers, residual and covariance), as the figures of a match are computed."""
+    return refine(
+        target,
+        source,
+        guess,
+        max_iterations=config.refine_iterations if iterate else 0,
+        max_distance=config.refine_distance,
+        inlier_distance=config.inlier_distance,
+        degeneracy=config.degeneracy,
+    )

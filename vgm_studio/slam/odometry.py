@@ -37,7 +37,7 @@ from vgm_studio.matching.branch_bound import (
 )
 from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.odometry import kiss_config
-from vgm_studio.matching.refinement import refine
+from vgm_studio.matching.refinement import refine_with
 from vgm_studio.matching.registration import as_3d, pose_to_4x4
 from vgm_studio.matching.submap import Submap
 
@@ -131,15 +131,7 @@ def _recover(
     hit = branch_and_bound(submap, coarse, np.zeros(3), window, step=turn, min_score=bar)
     if hit is None:
         return
-    found = refine(
-        submap.target(),
-        pts,
-        hit.pose,
-        max_iterations=config.refine_iterations,
-        max_distance=config.refine_distance,
-        inlier_distance=config.inlier_distance,
-        degeneracy=config.degeneracy,
-    ).estimate
+    found = refine_with(submap.target(), pts, hit.pose, config).estimate
     pose = pose_to_4x4(se2.compose(last, found))
     # kiss-icp's map holds this scan where it was lost: start it again from the two scans.
     pipeline.local_map.clear()
