@@ -38,12 +38,12 @@ from tests.fuzzing import (
     mutate_json_rows,
     store_rows,
 )
-from tests.untrusted import label_row, make_edges, write_log
+from tests.untrusted import seed_files
 from vgm_studio.datasets import open_log
 from vgm_studio.datasets.options import ReadOptions
 from vgm_studio.datasets.relations import read_relations
 from vgm_studio.labels import LabelStore
-from vgm_studio.labels.transfer import export_labels, import_labels
+from vgm_studio.labels.transfer import import_labels
 from vgm_studio.matching.edges import read_edges
 
 
@@ -59,26 +59,6 @@ def _field_ops(rng: random.Random) -> list[Op]:
         ("field", rng.random(), rng.randrange(40 * len(VALUE_PAYLOADS)))
         for _ in range(rng.randint(1, 3))
     ]
-
-
-def _seeds(folder: Path) -> dict[str, Path]:
-    log = write_log(folder)
-    edges = make_edges(log)
-    (folder / "edges.jsonl").write_text("".join(json.dumps(e.to_json()) + "\n" for e in edges))
-    rows = [label_row(e, annotator=name) for e in edges for name in ("ana", "ben")]
-    (folder / "labels.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
-    store = LabelStore(folder / "export")
-    import_labels(store, folder / "labels.jsonl")
-    export_labels(store, folder / "labels.csv")
-    store.close()
-    (folder / "r.relations").write_text("0.5 1.5 0.1 0 0 0 0 0.01\n1.5 2.5 0.1 0 0 0 0 0\n")
-    return {
-        "log": log,
-        "edges": folder / "edges.jsonl",
-        "labels.jsonl": folder / "labels.jsonl",
-        "labels.csv": folder / "labels.csv",
-        "relations": folder / "r.relations",
-    }
 
 
 def _mutant(seeds: dict[str, Path], kind: str, rng: random.Random) -> bytes:
@@ -188,7 +168,7 @@ def main() -> None:
     args = parser.parse_args()
     rng = random.Random(args.seed)
     with tempfile.TemporaryDirectory() as tmp:
-        seeds = _seeds(Path(tmp))
+        seeds = seed_files(Path(tmp))
         store = LabelStore(Path(tmp) / "target")
         import_labels(store, seeds["labels.jsonl"])
         rows = _campaign(seeds, store, args.cases, rng)

@@ -25,12 +25,12 @@ from tests.fuzzing import (
     store_rows,
 )
 from tests.test_cli_checks import run
-from tests.untrusted import label_row, make_edges, write_log
+from tests.untrusted import seed_files
 from vgm_studio.datasets import open_log
 from vgm_studio.datasets.options import ReadOptions
 from vgm_studio.datasets.relations import read_relations
 from vgm_studio.labels import LabelStore
-from vgm_studio.labels.transfer import export_labels, import_labels
+from vgm_studio.labels.transfer import import_labels
 from vgm_studio.matching.edges import read_edges
 
 FUZZ = settings(
@@ -62,24 +62,7 @@ field_ops = st.lists(
 @pytest.fixture(scope="module")
 def seeds(tmp_path_factory) -> dict[str, Path]:
     """Valid files of every kind, with a real log behind the edges and labels."""
-    folder = tmp_path_factory.mktemp("fuzz")
-    log = write_log(folder)
-    edges = make_edges(log)
-    (folder / "edges.jsonl").write_text("".join(json.dumps(e.to_json()) + "\n" for e in edges))
-    rows = [label_row(e, annotator=name) for e in edges for name in ("ana", "ben")]
-    (folder / "labels.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
-    store = LabelStore(folder / "export")
-    import_labels(store, folder / "labels.jsonl")
-    export_labels(store, folder / "labels.csv")
-    store.close()
-    (folder / "r.relations").write_text("0.5 1.5 0.1 0 0 0 0 0.01\n1.5 2.5 0.1 0 0 0 0 0\n")
-    return {
-        "log": log,
-        "edges": folder / "edges.jsonl",
-        "labels.jsonl": folder / "labels.jsonl",
-        "labels.csv": folder / "labels.csv",
-        "relations": folder / "r.relations",
-    }
+    return seed_files(tmp_path_factory.mktemp("fuzz"))
 
 
 def _mutant(seeds: dict[str, Path], kind: str, data: bytes, suffix: str) -> Path:

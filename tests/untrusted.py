@@ -7,6 +7,8 @@ from pathlib import Path
 from typing import Any
 
 from vgm_studio.core.hashing import content_hash
+from vgm_studio.labels import LabelStore
+from vgm_studio.labels.transfer import export_labels, import_labels
 from vgm_studio.matching.edges import Edge, edge_id
 
 SCANS = 6
@@ -62,3 +64,25 @@ def label_row(edge: Edge, **kw: Any) -> dict[str, Any]:
 def write_jsonl(path: Path, rows: list[Any]) -> Path:
     path.write_text("".join(json.dumps(r) + "\n" for r in rows))
     return path
+
+
+def seed_files(folder: Path) -> dict[str, Path]:
+    """Valid files of every kind the fuzzers mutate, with a real log behind the edges and
+    labels: the log, edges, labels as JSON lines and as CSV, and a relations file."""
+    log = write_log(folder)
+    edges = make_edges(log)
+    (folder / "edges.jsonl").write_text("".join(json.dumps(e.to_json()) + "\n" for e in edges))
+    rows = [label_row(e, annotator=name) for e in edges for name in ("ana", "ben")]
+    (folder / "labels.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    store = LabelStore(folder / "export")
+    import_labels(store, folder / "labels.jsonl")
+    export_labels(store, folder / "labels.csv")
+    store.close()
+    (folder / "r.relations").write_text("0.5 1.5 0.1 0 0 0 0 0.01\n1.5 2.5 0.1 0 0 0 0 0\n")
+    return {
+        "log": log,
+        "edges": folder / "edges.jsonl",
+        "labels.jsonl": folder / "labels.jsonl",
+        "labels.csv": folder / "labels.csv",
+        "relations": folder / "r.relations",
+    }
