@@ -81,17 +81,24 @@ def scan_poses(
     # The share of the way from one keyframe to the next: by odometry travelled (drift grows
     # with it), by scan count where the robot only turned.
     travelled = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(odometry[:, :2], axis=0).T))])
-    index = np.arange(count, dtype=np.float64)
-    share = []
-    for axis in (travelled, index):
-        span = axis[keyframes[nxt]] - axis[keyframes[owner]]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            share.append(np.where(span > 1e-6, (axis - axis[keyframes[owner]]) / span, np.nan))
-    t = np.clip(np.nan_to_num(np.where(np.isnan(share[0]), share[1], share[0])), 0.0, 1.0)
+    start, end = keyframes[owner], keyframes[nxt]
+    by_travel = _share(travelled, start, end)
+    by_index = _share(np.arange(count, dtype=np.float64), start, end)
+    t = np.clip(np.nan_to_num(np.where(np.isnan(by_travel), by_index, by_travel)), 0.0, 1.0)
     turn = se2.wrap_angle(there[:, 2] - here[:, 2])
     out = here + t[:, None] * (there - here)
     out[:, 2] = se2.wrap_angle(here[:, 2] + t * turn)
     return np.asarray(out, dtype=np.float64)
+
+
+def _share(
+    axis: NDArray[np.float64], start: NDArray[np.int64], end: NDArray[np.int64]
+) -> NDArray[np.float64]:
+    """How far each scan is from its keyframe ``start`` towards ``end`` along ``axis``; NaN
+    where the two keyframes lie at one place on it."""
+    span = axis[end] - axis[start]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(span > 1e-6, (axis - axis[start]) / span, np.nan)
 
 
 def dense_reference(log: ScanLog, odometry: NDArray[np.float64]) -> NDArray[np.float64] | None:
