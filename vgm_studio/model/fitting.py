@@ -12,6 +12,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -23,6 +24,7 @@ from tqdm import tqdm
 from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.model.features import PairSample
 from vgm_studio.model.metrics import binary_metrics
+from vgm_studio.model.resume import RunState, load_run, run_key, save_run
 from vgm_studio.model.validator import InputSpec, batched_logits, forward
 
 EpochHook = Callable[[int, int], None]
@@ -153,52 +155,60 @@ def fit_network(
     spec: InputSpec,
     rows: Rows,
     recipe: Recipe,
-    device: torch.device,
     *,
     on_epoch: EpochHook | None = None,
     log: Callable[[str], None] | None = None,
     progress: bool = False,
+    resume: Path | None = None,
 ) -> Fitted:
     """Trains ``net`` on ``rows.train``, stops early on ``rows.val``, and judges it there.
 
     Args:
-        net: The network, on ``device``, with its starting weights (fresh or warm).
+        net: The network, where it is to train, with its starting weights (fresh or warm).
         spec: How its input batches are made.
         rows: The samples, labels and split.
         recipe: How to train.
-        device: Where.
         on_epoch: Called with (epochs done, epochs planned) before training and after each
             epoch; it may raise to stop the run.
         log: Told one line per epoch.
         progress: Show a progress bar per epoch.
+        resume: Where the run's state is written after each epoch; a state there from the
+            same recipe and rows is continued from (``model/resume.py``).
 
     Returns:
         The best epoch's weights (the last one's when nothing is held out) and its figures.
     """
+    device = next(net.parameters()).device
     run = _Run(net, spec, rows, recipe, device)
-    best_loss, best_state, stale = math.inf, copy.deepcopy(net.state_dict()), 0
-    history: list[dict[str, float]] = []
+    state = run.start(resume)
+    if log is not None and state.epoch:
+        log(f"resuming after epoch {state.epoch} of {recipe.epochs} from {resume}")
     if on_epoch:
-        on_epoch(0, recipe.epochs)
-    for epoch in range(1, recipe.epochs + 1):
-        record = run.epoch(epoch, progress)
-        history.append(record)
+        on_epoch(state.epoch, recipe.epochs)
+    while state.epoch < recipe.epochs and state.stale < recipe.patience:
+        state.epoch += 1
+        record = run.epoch(state.epoch, progress)
+        state.history.append(record)
         if log is not None:
             log(_epoch_line(record))
         # Nothing held out: the last epoch is the best we know.
-        val_loss = record.get("val_loss", -float(epoch))
-        if val_loss < best_loss - 1e-4:
-            best_loss, best_state, stale = val_loss, copy.deepcopy(net.state_dict()), 0
+        val_loss = record.get("val_loss", -float(state.epoch))
+        if val_loss < state.best_loss - 1e-4:
+            state.best_loss, state.best, state.stale = val_loss, _copy(net), 0
         else:
-            stale += 1
+            state.stale += 1
+        if resume is not None:
+            save_run(resume, run.snapshot(state))
         if on_epoch:
-            on_epoch(epoch, recipe.epochs)
-        if stale >= recipe.patience:
-            if log is not None:
-                log(f"stopping: no better validation loss for {recipe.patience} epochs")
-            break
-    net.load_state_dict(best_state)
-    return _judged(net, spec, run.val_samples, run.val_labels, device, best_state, history)
+            on_epoch(state.epoch, recipe.epochs)
+        if state.stale >= recipe.patience and log is not None:
+            log(f"stopping: no better validation loss for {recipe.patience} epochs")
+    net.load_state_dict(state.best)
+    return _judged(net, spec, run.val_samples, run.val_labels, device, state.best, state.history)
+
+
+def _copy(net: nn.Module) -> dict[str, torch.Tensor]:
+    return copy.deepcopy(net.state_dict())
 
 
 class _Run:
@@ -219,6 +229,35 @@ class _Run:
         )
         self.val_samples = [rows.samples[i] for i in rows.val]
         self.val_labels = rows.labels[rows.val]
+        self.key = run_key(recipe, rows.labels, rows.train, rows.val)
+
+    def start(self, resume: Path | None) -> RunState:
+        """The state to go on from: the one saved at ``resume`` for this run, else epoch 0."""
+        saved = load_run(resume, self.key) if resume is not None else None
+        if saved is None:
+            return self.snapshot(None)
+        self.net.load_state_dict(saved.net)
+        self.optimiser.load_state_dict(saved.optimiser)
+        self.schedule.load_state_dict(saved.schedule)
+        self.rng.bit_generator.state = saved.draws
+        torch.set_rng_state(saved.torch_rng)
+        return saved
+
+    def snapshot(self, state: RunState | None) -> RunState:
+        """``state``'s bookkeeping with the run's moving parts as they are now."""
+        return RunState(
+            key=self.key,
+            epoch=state.epoch if state else 0,
+            best_loss=state.best_loss if state else math.inf,
+            stale=state.stale if state else 0,
+            history=state.history if state else [],
+            best=state.best if state else _copy(self.net),
+            net=_copy(self.net),
+            optimiser=copy.deepcopy(self.optimiser.state_dict()),
+            schedule=self.schedule.state_dict(),
+            draws=dict(self.rng.bit_generator.state),
+            torch_rng=torch.get_rng_state(),
+        )
 
     def epoch(self, epoch: int, progress: bool) -> dict[str, float]:
         """Trains one epoch of class-balanced draws; returns its losses and seconds."""

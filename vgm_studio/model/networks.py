@@ -217,8 +217,9 @@ def _sparse_block(
     """
     conv = block[0]
     assert isinstance(conv, nn.Conv2d) and conv.groups == 1 and conv.dilation == (1, 1)
-    (kh, kw), (sh, sw), (ph, pw) = conv.kernel_size, conv.stride, conv.padding
-    assert isinstance(ph, int) and isinstance(pw, int)
+    padding = conv.padding
+    assert not isinstance(padding, str)  # "same"/"valid" are not used by our blocks
+    (kh, kw), (sh, sw), (ph, pw) = conv.kernel_size, conv.stride, padding
     channels = conv.out_channels
     field = empty.view(1, -1, 1, 1).expand(1, -1, side, side)
     base = nn.functional.conv2d(field, conv.weight, conv.bias, conv.stride, conv.padding)

@@ -187,6 +187,9 @@ def train(
 ) -> Checkpoint:
     """Trains ``config.model`` on ``data`` and writes the checkpoint to ``out``.
 
+    A network's run state is kept in ``out`` + ``.partial`` after each epoch and removed
+    when the checkpoint is written: stopped, the same call goes on after the last epoch.
+
     Returns:
         The checkpoint written.
     """
@@ -202,10 +205,12 @@ def train(
         f"{counts['validation']['success']} + {counts['validation']['failure']}"
     )
     rows = Rows(data.samples, data.labels, train_idx, val_idx)
+    # A stopped network run goes on from here when the same command is given again.
+    resume = out.with_name(out.name + ".partial")
     if model.holds == "score":
         checkpoint = _fit_score(rows, config)
     else:
-        checkpoint = _fit_network(rows, config, progress, log)
+        checkpoint = _fit_network(rows, config, progress, log, resume)
     checkpoint.training = {
         "files": data.files,
         "counts": counts,
@@ -213,6 +218,7 @@ def train(
         "config": {k: v for k, v in asdict(config).items() if k != "vgm"},
     }
     save_checkpoint(out, checkpoint)
+    resume.unlink(missing_ok=True)
     return checkpoint
 
 
@@ -236,14 +242,16 @@ def _fit_score(rows: Rows, config: TrainConfig) -> Checkpoint:
 
 
 def _fit_network(
-    rows: Rows, config: TrainConfig, progress: bool, log: Callable[[str], None]
+    rows: Rows, config: TrainConfig, progress: bool, log: Callable[[str], None], resume: Path
 ) -> Checkpoint:
-    """A network, trained by the shared loop from fresh weights."""
+    """A network, trained by the shared loop from fresh weights (or from ``resume``)."""
     device = pick_device(config.device)
     net, hyper = build_network(config.model, config.hyper)
     net = net.to(device).to(memory_format=torch.channels_last)  # type: ignore[call-overload]
     spec = input_spec(config.model, hyper, config.vgm)
-    fitted = fit_network(net, spec, rows, config.recipe(), device, log=log, progress=progress)
+    fitted = fit_network(
+        net, spec, rows, config.recipe(), log=log, progress=progress, resume=resume
+    )
     return Checkpoint(
         model=config.model,
         vgm=config.vgm,

@@ -106,7 +106,7 @@ def fit(
         The best epoch's weights and figures.
     """
     torch.manual_seed(config.seed)
-    device = torch.device("cpu")  # beside the app: the GPU, if any, is not ours to take
+    # Built on the CPU and trained there: beside the app, the GPU, if any, is not ours to take.
     net, hyper = build_network(MODEL, config.hyper)
     warm = init is not None and init.model == MODEL and init.hyper == hyper
     if warm:
@@ -115,7 +115,7 @@ def fit(
     net = net.to(memory_format=torch.channels_last)  # type: ignore[call-overload]
     spec = input_spec(MODEL, hyper, config.vgm)
     rows = Rows(samples, labels, train_idx, held_idx)
-    fitted = fit_network(net, spec, rows, config.recipe(), device, on_epoch=on_epoch)
+    fitted = fit_network(net, spec, rows, config.recipe(), on_epoch=on_epoch)
     return FitResult(
         state_dict=fitted.state_dict,
         hyper=hyper,
