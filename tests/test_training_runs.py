@@ -99,3 +99,32 @@ def test_a_state_from_another_run_is_not_used_and_a_broken_one_is_named(rows, tm
     state.write_bytes(b"not a run")
     with pytest.raises(InputError, match=r"run\.partial.*not a training run state"):
         _fit(rows, Recipe(epochs=2, epoch_size=32, batch_size=16, seed=6), state)
+
+
+@pytest.mark.parametrize("training", [False, True])
+def test_paper_network_from_cells_is_its_dense_forward_and_gradient(training):
+    from vgm_studio.model.validator import network_logits
+
+    torch.manual_seed(2)
+    net, hyper = build_network("vgmnet-paper", {"dropout": 0.0})
+    # In float64: batch norm over fields that are nearly constant magnifies float32's
+    # rounding, and this test is after the arithmetic, not the rounding.
+    net = net.double().train(training)
+    for m in net.modules():  # statistics that are not the identity, as after training
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-0.05, 0.05)
+            m.running_var.uniform_(1e-4, 1e-3)
+    spec = input_spec("vgmnet-paper", hyper, VGMParams())
+    samples, _ = matched_pairs(6, seed=4)
+    samples[2] = PairSample(np.zeros((0, 2), np.float32), samples[2].cur, 0.7, 0.02)
+    x, _ = spec.tensors(samples, torch.device("cpu"))
+    dense = net(x.double())
+    dense.sum().backward()
+    want = {n: p.grad.clone() for n, p in net.named_parameters()}
+    net.zero_grad()
+    got = network_logits(net, spec, samples, torch.device("cpu"))
+    got.sum().backward()
+    torch.testing.assert_close(got, dense, rtol=1e-9, atol=1e-9)
+    assert float(dense.detach().std()) > 1e-3  # the pairs differ, so equal outputs say something
+    for name, p in net.named_parameters():
+        torch.testing.assert_close(p.grad, want[name], rtol=1e-8, atol=1e-9, msg=name)

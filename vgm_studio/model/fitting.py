@@ -25,7 +25,7 @@ from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.model.features import PairSample
 from vgm_studio.model.metrics import binary_metrics
 from vgm_studio.model.resume import RunState, load_run, run_key, save_run
-from vgm_studio.model.validator import InputSpec, batched_logits, forward
+from vgm_studio.model.validator import InputSpec, batched_logits, network_logits
 
 EpochHook = Callable[[int, int], None]
 
@@ -134,9 +134,9 @@ def train_step(
     device: torch.device,
 ) -> float:
     """One optimiser step on a batch (each pair turned by ``rotations``); returns its loss."""
-    x, extra = spec.tensors(samples, device, rotations)
+    logits = network_logits(net, spec, samples, device, rotations)
     y = torch.from_numpy(labels.astype(np.float32)).to(device)
-    loss = nn.functional.binary_cross_entropy_with_logits(forward(net, x, extra), y)
+    loss = nn.functional.binary_cross_entropy_with_logits(logits, y)
     optimiser.zero_grad(set_to_none=True)
     loss.backward()  # type: ignore[no-untyped-call]
     optimiser.step()

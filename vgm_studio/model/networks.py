@@ -81,6 +81,42 @@ class VGMNetPaper(nn.Module):
         logit: torch.Tensor = self.head(self.features(x))
         return logit
 
+    def forward_cells(
+        self,
+        batch: int,
+        side: int,
+        index: torch.Tensor,
+        channel: torch.Tensor,
+        value: torch.Tensor,
+        extra: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """``forward`` of a batch given by its occupied cells, in training as in eval.
+
+        The same function as ``forward`` on the dense 400×400 batch (``VGMNet.forward_cells``
+        says how), at a fraction of its cost: over 99% of the cells are empty, and the
+        1×1 convolution's 16 channels at every cell were most of the memory a pass moves.
+
+        Args:
+            batch: Pairs in the batch.
+            side: Grid side.
+            index: Each occupied cell's pair·side² + position.
+            channel: Each occupied cell's channel (0: previous scan, 1: current).
+            value: Each occupied cell's value.
+            extra: Not read (the paper's network takes the VGM alone).
+        """
+        conv = self.features[0]
+        first = self.features[2]
+        assert isinstance(conv, nn.Conv2d) and conv.bias is not None
+        assert isinstance(first, nn.Sequential)
+        rows, at = torch.unique(index, return_inverse=True)
+        cells = conv.weight.new_zeros(len(rows), conv.in_channels)
+        cells[at, channel] = value.to(cells.dtype)
+        pre = cells @ conv.weight[:, :, 0, 0].T + conv.bias
+        empty = torch.relu(conv.bias)
+        x = _sparse_block(first, batch, side, rows, torch.relu(pre) - empty, empty)
+        logit: torch.Tensor = self.head(self.features[3:](x))
+        return logit
+
 
 @dataclass(frozen=True)
 class SparseConfig:

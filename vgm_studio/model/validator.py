@@ -23,7 +23,7 @@ from vgm_studio.model.features import (
     rgb_batch,
     vgm_batch,
 )
-from vgm_studio.model.networks import VGMNet, fuse_batch_norm
+from vgm_studio.model.networks import VGMNet, VGMNetPaper, fuse_batch_norm
 from vgm_studio.model.registry import build_network, entry
 from vgm_studio.model.score import ScoreModel
 from vgm_studio.vgm.grid import VGMParams
@@ -109,27 +109,53 @@ def forward(net: nn.Module, x: torch.Tensor, extra: torch.Tensor | None) -> torc
     return logits
 
 
-# Pairs per network pass on the sparse path: the stem's output for 64 pairs (20 MB) is
-# reused from the heap; for 256 (82 MB) each pass maps fresh pages, which costs more than the
-# convolutions on a CPU.
+# Pairs per network pass on the sparse path at inference: the stem's output for 64 pairs
+# (20 MB) is reused from the heap; for 256 (82 MB) each pass maps fresh pages, which costs
+# more than the convolutions on a CPU.
 _NET_CHUNK = 64
 
 
-def _sparse_logits(
-    net: VGMNet, spec: InputSpec, samples: Sequence[PairSample], device: torch.device
+def network_logits(
+    net: nn.Module,
+    spec: InputSpec,
+    samples: Sequence[PairSample],
+    device: torch.device,
+    rotations: Sequence[float] | NDArray[np.float64] | None = None,
 ) -> torch.Tensor:
-    """``forward`` of a folded VGMNet fed the batch's occupied cells, not its dense VGMs.
+    """The network's logits for a batch, in the mode it is in (training or eval).
 
-    The cells of the whole batch are built in one numpy pass; the network then takes them
-    ``_NET_CHUNK`` pairs at a time.
+    Networks that take the batch's occupied cells (``forward_cells``) are fed those instead of
+    dense VGMs: the paper's network always (the same function, at a fraction of the cost);
+    the folded VGMNet at inference, where its stem folds into one affine map.
     """
+    cells_path = spec.kind == "vgm" and (
+        isinstance(net, VGMNetPaper) or (isinstance(net, VGMNet) and spec.fold > 1)
+    )
+    if cells_path and not (isinstance(net, VGMNet) and net.training):
+        return _cells_logits(net, spec, samples, device, rotations)
+    x, extra = spec.tensors(samples, device, rotations)
+    return forward(net, x, extra)
+
+
+def _cells_logits(
+    net: nn.Module,
+    spec: InputSpec,
+    samples: Sequence[PairSample],
+    device: torch.device,
+    rotations: Sequence[float] | NDArray[np.float64] | None,
+) -> torch.Tensor:
+    """``forward_cells`` of the batch's occupied cells, built in one numpy pass; at inference
+    the network takes them ``_NET_CHUNK`` pairs at a time (in training, batch norm's
+    statistics are the whole batch's)."""
+    assert isinstance(net, VGMNet | VGMNetPaper)
     cells = folded_cells(
-        samples, spec.vgm, fold=spec.fold, lift=spec.lift, occupancy=spec.occupancy
+        samples, spec.vgm, rotations, fold=spec.fold, lift=spec.lift, occupancy=spec.occupancy
     )
     figures = figures_matrix(samples, spec.spread).astype(np.float32) if spec.figures else None
+    step = cells.batch if net.training else _NET_CHUNK
     out = []
-    for start in range(0, cells.batch, _NET_CHUNK):
-        count = min(_NET_CHUNK, cells.batch - start)
+    for start in range(0, cells.batch, step):
+        count = min(step, cells.batch - start)
         mine = (cells.pair >= start) & (cells.pair < start + count)
         index = (cells.pair[mine] - start) * cells.side * cells.side + cells.position[mine]
         extra = None
@@ -161,11 +187,7 @@ def batched_logits(
     with torch.inference_mode():
         for start in range(0, len(samples), batch_size):
             chunk = samples[start : start + batch_size]
-            if isinstance(net, VGMNet) and spec.kind == "vgm" and spec.fold > 1:
-                logits = _sparse_logits(net, spec, chunk, device)
-            else:
-                x, extra = spec.tensors(chunk, device)
-                logits = forward(net, x, extra)
+            logits = network_logits(net, spec, chunk, device)
             out[start : start + len(chunk)] = logits.float().cpu().numpy()
     return out
 
