@@ -22,10 +22,10 @@ from vgm_studio.core.hashing import content_hash
 from vgm_studio.errors import InputError
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge, read_edges
+from vgm_studio.model.calibration import calibrate, calibration_mask
 from vgm_studio.model.checkpoint import Checkpoint, save_checkpoint
 from vgm_studio.model.features import PairSample, figures_matrix, load_samples
-from vgm_studio.model.fitting import Recipe, Rows, choose_threshold, fit_network, judge
-from vgm_studio.model.operating import PrecisionCurve, precision_curve
+from vgm_studio.model.fitting import Recipe, Rows, choose_threshold, fit_network
 from vgm_studio.model.registry import build_network, entry
 from vgm_studio.model.score import ScoreModel
 from vgm_studio.model.validator import input_spec, pick_device
@@ -208,43 +208,44 @@ def train(
     # A stopped network run goes on from here when the same command is given again.
     resume = out.with_name(out.name + ".partial")
     if model.holds == "score":
-        checkpoint = _fit_score(rows, config)
+        checkpoint, val_p = _fit_score(rows, config)
     else:
-        checkpoint = _fit_network(rows, config, progress, log, resume)
+        checkpoint, val_p = _fit_network(rows, config, progress, log, resume)
+    real = calibration_mask([data.edges[i] for i in val_idx], data.labels[val_idx])
+    calibrate(checkpoint, data.labels[val_idx][real], val_p[real])
     checkpoint.training = {
         "files": data.files,
         "counts": counts,
         "seconds": time.perf_counter() - start,
         "config": {k: v for k, v in asdict(config).items() if k != "vgm"},
+        "calibration_edges": int(real.sum()),
     }
     save_checkpoint(out, checkpoint)
     resume.unlink(missing_ok=True)
     return checkpoint
 
 
-def _fit_score(rows: Rows, config: TrainConfig) -> Checkpoint:
-    """The score model, fitted in closed form and judged on the validation rows."""
+def _fit_score(rows: Rows, config: TrainConfig) -> tuple[Checkpoint, NDArray[np.float64]]:
+    """The score model, fitted in closed form; and its p(success) on the validation rows."""
     spread = bool(config.hyper.get("spread", False))
     score = ScoreModel.fit(
         figures_matrix([rows.samples[i] for i in rows.train], spread), rows.labels[rows.train]
     )
     probs = score.predict(figures_matrix([rows.samples[i] for i in rows.val], spread))
-    threshold, metrics = judge(rows.labels[rows.val], probs)
-    return Checkpoint(
+    checkpoint = Checkpoint(
         model=config.model,
         vgm=config.vgm,
         hyper={"spread": spread} if spread else {},
-        threshold=threshold,
-        metrics=metrics,
         score=asdict(score),
-        curve=_curve(rows, probs),
     )
+    return checkpoint, probs
 
 
 def _fit_network(
     rows: Rows, config: TrainConfig, progress: bool, log: Callable[[str], None], resume: Path
-) -> Checkpoint:
-    """A network, trained by the shared loop from fresh weights (or from ``resume``)."""
+) -> tuple[Checkpoint, NDArray[np.float64]]:
+    """A network, trained by the shared loop from fresh weights (or from ``resume``); and its
+    p(success) on the validation rows."""
     device = pick_device(config.device)
     net, hyper = build_network(config.model, config.hyper)
     net = net.to(device).to(memory_format=torch.channels_last)  # type: ignore[call-overload]
@@ -252,20 +253,12 @@ def _fit_network(
     fitted = fit_network(
         net, spec, rows, config.recipe(), log=log, progress=progress, resume=resume
     )
-    return Checkpoint(
+    checkpoint = Checkpoint(
         model=config.model,
         vgm=config.vgm,
         hyper=hyper,
-        threshold=fitted.threshold,
-        metrics=fitted.metrics,
         state_dict=fitted.state_dict,
         history=fitted.history,
         device=str(device),
-        curve=_curve(rows, fitted.val_p),
     )
-
-
-def _curve(rows: Rows, probs: NDArray[np.float64]) -> PrecisionCurve | None:
-    """The whole validation curve, so a cut can later be chosen by precision
-    (``--loop-precision``)."""
-    return precision_curve(rows.labels[rows.val], probs) if len(rows.val) else None
+    return checkpoint, fitted.val_p

@@ -193,10 +193,23 @@ def plan(config: SimConfig) -> SimPlan:
     return SimPlan(config, world, truth, noisy_odometry(truth.poses, config, odom_rng))
 
 
+# The first line of every simulated log says so: training tells our worlds from real logs by it.
+SIMULATED_MARK = "simulate: synthetic CARMEN log"
+
+
+def is_simulated(log: str | Path) -> bool:
+    """Whether ``log`` was written by ``simulate`` (a log that cannot be read is not)."""
+    try:
+        with open(log, encoding="utf-8", errors="replace") as f:
+            return SIMULATED_MARK in f.readline()
+    except OSError:
+        return False
+
+
 def _header(p: SimPlan) -> list[str]:
     c = p.config
     lines = [
-        f"# vgm-studio {__version__} simulate: synthetic CARMEN log (vgm_studio.simulation)",
+        f"# vgm-studio {__version__} {SIMULATED_MARK} (vgm_studio.simulation)",
         f"# world: {p.world.description}",
         f"# scans: {len(p.truth)}, travelled: {p.truth.travelled():.2f} m, "
         f"scan period: {c.scan_period:.6g} s",
