@@ -9,8 +9,11 @@ precision ≥ 0.99 twice: at the cut the validation curve picks for 0.99 (what
 ``--loop-precision 0.99`` would use; its test precision beside it) and the best any cut on
 the test curve reaches (an upper bound, chosen on the test set).
 
+Fold models already in build/edges/folds are used again (a stopped run goes on with the next
+one; ``--retrain`` trains them all again).
+
 Run: python benchmarks/bench_generalisation.py [--models vgmnet,score] [--buildings orebro]
-     [--epochs 12] [--epoch-size 6000] [--max-train N]
+     [--epochs 12] [--epoch-size 6000] [--max-train N] [--retrain]
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from pathlib import Path
 from _common import datasets_dir, machine, pin_to_cores, table
 from edge_sets import BUILD, training_edges
 from folds import Building, make_folds
+from recalibrate import recalibrate
 
 MODELS = ("vgmnet", "rgb-baseline", "score")
 PRECISION = 0.99
@@ -112,6 +116,7 @@ def _row(building: str, model: str, labels, probs, checkpoint, seconds: float) -
 
 def _fold_rows(fold, data, origin: list[str], models: list[str], args) -> list[list[str]]:
     """Trains each model on the fold's training files and tests it on the held-out loops."""
+    from vgm_studio.model.checkpoint import load_checkpoint
     from vgm_studio.model.training import TrainConfig, train
     from vgm_studio.model.validator import Validator
 
@@ -119,7 +124,6 @@ def _fold_rows(fold, data, origin: list[str], models: list[str], args) -> list[l
     training = _subset(data, origin, fold.train)
     rows = []
     for model in models:
-        start = time.perf_counter()
         out = BUILD / "folds" / f"{fold.held_out}-{model}.pt"
         epochs, epoch_size = RECIPES[model]
         config = TrainConfig(
@@ -131,9 +135,15 @@ def _fold_rows(fold, data, origin: list[str], models: list[str], args) -> list[l
             # The bundled default's inputs (train_default.py: the command's defaults).
             hyper={"figures": True, "spread": True} if model == "vgmnet" else {},
         )
-        checkpoint = train(training, config, out, progress=False, log=lambda _line: None)
+        if args.retrain or not out.exists():
+            train(training, config, out, progress=False, log=lambda _line: None)
+        elif "calibration_edges" not in load_checkpoint(out).training:
+            print(recalibrate(out, training), flush=True)  # trained before the rule
+        checkpoint = load_checkpoint(out)
+        start = time.perf_counter()
         probs = Validator.load(out, device="cpu").predict_samples(test.samples)
-        seconds = time.perf_counter() - start
+        # Training (as the checkpoint recorded it) and testing.
+        seconds = checkpoint.training["seconds"] + time.perf_counter() - start
         rows.append(_row(fold.held_out, model, test.labels, probs, checkpoint, seconds))
         print(" | ".join(rows[-1]), flush=True)
     return rows
@@ -146,6 +156,9 @@ def main() -> None:
     parser.add_argument("--epochs", type=int, default=None, help="Epochs per fold model.")
     parser.add_argument("--epoch-size", type=int, default=None, help="Draws per epoch.")
     parser.add_argument("--max-train", type=int, default=None, help="Cap training edges.")
+    parser.add_argument(
+        "--retrain", action="store_true", help="Train fold models again even if present."
+    )
     args = parser.parse_args()
     pin_to_cores(2)
     from vgm_studio.model.training import read_labelled

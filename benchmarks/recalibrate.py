@@ -43,8 +43,11 @@ def _files(recorded: list[dict]) -> list[Path]:
     ]
 
 
-def recalibrate(path: Path) -> str:
-    """Applies the calibration rule to the checkpoint at ``path``; returns a report line."""
+def recalibrate(path: Path, data=None) -> str:
+    """Applies the calibration rule to the checkpoint at ``path``; returns a report line.
+
+    ``data``: the labelled set it was trained on, when the caller has it read already.
+    """
     from vgm_studio.model.calibration import calibrate, calibration_mask
     from vgm_studio.model.checkpoint import load_checkpoint, save_checkpoint
     from vgm_studio.model.metrics import binary_metrics
@@ -53,7 +56,8 @@ def recalibrate(path: Path) -> str:
 
     checkpoint = load_checkpoint(path)
     before = _state_hash(checkpoint.state_dict)
-    data = read_labelled(_files(checkpoint.training["files"]), progress=False)
+    if data is None:
+        data = read_labelled(_files(checkpoint.training["files"]), progress=False)
     config = checkpoint.training["config"]
     _, val = stratified_split(data.labels, data.groups, config["val_fraction"], config["seed"])
     labels = data.labels[val]
