@@ -30,8 +30,8 @@ MAX_MB = 30
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--device", default="cpu", help="cpu, cuda or auto.")
-    parser.add_argument("--epochs", type=int, default=8)
-    parser.add_argument("--epoch-size", type=int, default=8192, help="Draws per epoch.")
+    parser.add_argument("--epochs", type=int, default=5)
+    parser.add_argument("--epoch-size", type=int, default=6144, help="Draws per epoch.")
     parser.add_argument("--threads", type=int, default=2, help="torch CPU threads.")
     args = parser.parse_args()
     if args.device == "cpu":
