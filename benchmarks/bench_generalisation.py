@@ -69,7 +69,7 @@ def buildings(held_out: list[str]) -> tuple[list[Building], list[Path]]:
     return made, [p for p in train if p.name.startswith("sim-")]
 
 
-def _subset(data, origin: list[str], files: list[Path]):
+def subset(data, origin: list[str], files: list[Path]):
     """The labelled set restricted to the edges read from ``files`` (``origin``: each
     edge's file)."""
     from vgm_studio.model.training import LabelledSet
@@ -120,8 +120,8 @@ def _fold_rows(fold, data, origin: list[str], models: list[str], args) -> list[l
     from vgm_studio.model.training import TrainConfig, train
     from vgm_studio.model.validator import Validator
 
-    test = _subset(data, origin, [fold.test])
-    training = _subset(data, origin, fold.train)
+    test = subset(data, origin, [fold.test])
+    training = subset(data, origin, fold.train)
     rows = []
     for model in models:
         out = BUILD / "folds" / f"{fold.held_out}-{model}.pt"

@@ -1,0 +1,58 @@
+"""The operating point SLAM needs: cuts chosen by validation precision, judged on Intel loops.
+
+For the bundled model (or the checkpoint given), each ``--loop-precision`` p: the lowest cut
+whose validation precision is ≥ p (the checkpoint's curve; what ``slam --loop-precision p``
+uses), its validation precision and recall, and precision, recall and false positives on the
+Intel loops (never trained on). Target (issue 12): recall ≥ 0.80 at precision ≥ 0.99 on
+Intel loops. Run: python benchmarks/operating_point.py [CHECKPOINT]
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+from _common import REPO, machine, pin_to_cores, table
+from edge_sets import test_edges
+
+DEFAULT = REPO / "assets" / "models" / "vgmnet-default.pt"
+PRECISIONS = (0.95, 0.98, 0.99, 0.995)
+
+
+def main() -> None:
+    pin_to_cores(2)
+    from vgm_studio.model.metrics import binary_metrics
+    from vgm_studio.model.training import read_labelled
+    from vgm_studio.model.validator import Validator
+
+    path = Path(sys.argv[1]) if len(sys.argv) > 1 else DEFAULT
+    validator = Validator.load(path, device="cpu")
+    curve = validator.checkpoint.curve
+    if curve is None:
+        raise SystemExit(f"{path}: the checkpoint keeps no validation curve")
+    test = read_labelled([test_edges()], progress=False)
+    probs = validator.predict_samples(test.samples)
+    cuts = [(f"{p}", validator.threshold_at_precision(p)) for p in PRECISIONS]
+    rows = []
+    for name, cut in [*cuts, ("(checkpoint threshold)", validator.threshold)]:
+        at = np.flatnonzero(np.asarray(curve.thresholds) >= cut)
+        k = int(at[0]) if len(at) else len(curve.thresholds) - 1
+        m = binary_metrics(test.labels, probs, cut)
+        rows.append(
+            [
+                name,
+                f"{cut:.3f}",
+                f"{curve.precision[k]:.3f} / {curve.recall[k]:.3f}",
+                f"{m['precision']:.3f} / {m['recall']:.3f}",
+                str(m["fp"]),
+            ]
+        )
+    print(f"# {path.name} on {len(test.labels)} Intel loops; cuts from its validation curve")
+    print(f"# {machine()}")
+    header = ["--loop-precision", "cut p(success)", "validation P / R", "Intel P / R", "Intel FP"]
+    print(table(header, rows))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
