@@ -229,7 +229,8 @@ class _Run:
         )
         self.val_samples = [rows.samples[i] for i in rows.val]
         self.val_labels = rows.labels[rows.val]
-        self.key = run_key(recipe, rows.labels, rows.train, rows.val)
+        shapes = [(name, tuple(v.shape)) for name, v in net.state_dict().items()]
+        self.key = run_key(recipe, repr((spec, shapes)), rows.labels, rows.train, rows.val)
 
     def start(self, resume: Path | None) -> RunState:
         """The state to go on from: the one saved at ``resume`` for this run, else epoch 0."""

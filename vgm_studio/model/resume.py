@@ -53,9 +53,11 @@ class RunState:
     torch_rng: torch.Tensor
 
 
-def run_key(recipe: object, *arrays: np.ndarray) -> str:
-    """A fingerprint of a recipe (a dataclass) and the rows it trains on."""
+def run_key(recipe: object, network: str, *arrays: np.ndarray) -> str:
+    """A fingerprint of a recipe (a dataclass), the network (its input and layer shapes, as
+    text) and the rows it trains on."""
     digest = hashlib.sha256(repr(sorted(asdict(recipe).items())).encode())  # type: ignore[call-overload]
+    digest.update(network.encode())
     for array in arrays:
         digest.update(np.ascontiguousarray(array).tobytes())
     return digest.hexdigest()
