@@ -260,7 +260,7 @@ def _sparse_block(
     field = empty.view(1, -1, 1, 1).expand(1, -1, side, side)
     base = nn.functional.conv2d(field, conv.weight, conv.bias, conv.stride, conv.padding)
     oh, ow = base.shape[2:]
-    out = base.permute(0, 2, 3, 1).expand(batch, oh, ow, channels).reshape(-1, channels).clone()
+    out = base.permute(0, 2, 3, 1).repeat(batch, 1, 1, 1).view(-1, channels)  # one copy
     pair, position = rows // (side * side), rows % (side * side)
     i, j = position // side, position % side
     for ki in range(kh):

@@ -153,10 +153,12 @@ def _cells_logits(
     )
     figures = figures_matrix(samples, spec.spread).astype(np.float32) if spec.figures else None
     step = cells.batch if net.training else _NET_CHUNK
+    # Cells come sorted by pair, so each chunk's cells are one slice.
+    bounds = np.searchsorted(cells.pair, np.arange(0, cells.batch + step, step))
     out = []
     for start in range(0, cells.batch, step):
         count = min(step, cells.batch - start)
-        mine = (cells.pair >= start) & (cells.pair < start + count)
+        mine = slice(bounds[start // step], bounds[start // step + 1])
         index = (cells.pair[mine] - start) * cells.side * cells.side + cells.position[mine]
         extra = None
         if figures is not None:
