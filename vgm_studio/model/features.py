@@ -94,7 +94,7 @@ class FoldedCells:
         batch: Pairs in the batch.
         side: Folded grid side, size / fold.
         depth: Folded channels, C·fold² (C is 2, or 4 with occupancy).
-        pair: For each occupied cell, its pair's index in the batch.
+        pair: For each occupied cell, its pair's index in the batch (ascending).
         position: Its folded position, row·side + column.
         channel: Its folded channel, c·fold² + (i mod fold)·fold + (j mod fold).
         value: Its value (lifted; 1 in the occupancy channels).
@@ -141,6 +141,10 @@ def folded_cells(
         pair, position = np.tile(pair, 2), np.tile(position, 2)
         channel = np.r_[channel, channel + 2 * fold * fold]
         value = np.r_[value, np.ones_like(value)]
+        # Kept sorted by pair, as without occupancy: the network takes a batch's pairs as
+        # slices.
+        order = np.argsort(pair, kind="stable")
+        pair, position, channel, value = pair[order], position[order], channel[order], value[order]
     depth = (4 if occupancy else 2) * fold * fold
     return FoldedCells(len(samples), side, depth, pair, position, channel, value)
 
