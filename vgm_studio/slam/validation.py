@@ -97,6 +97,10 @@ class EdgeValidator:
                 keep &= ~loop | (p >= self.precision_cut)
             for e, pe, k in zip(edges, p, keep, strict=True):
                 e.p_success, e.kept = float(pe), bool(k)
+        # The validator's own decision; only the consistency check (loops) may drop ``kept``
+        # later. Sequential edges the validator rejects must say so too.
+        for e in edges:
+            e.validated = e.kept
 
     @property
     def threshold(self) -> float:
