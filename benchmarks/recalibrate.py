@@ -71,7 +71,7 @@ def recalibrate(path: Path, data=None) -> str:
     if any(again[k] != checkpoint.metrics[k] for k in KEYS):
         raise SystemExit(f"{path}: recorded validation figures not reproduced; left as it was")
     old = checkpoint.threshold
-    calibrate(checkpoint, labels[real], probs[real])
+    calibrate(checkpoint, labels, probs, real)
     checkpoint.training["calibration_edges"] = int(real.sum())
     save_checkpoint(path, checkpoint)
     assert _state_hash(load_checkpoint(path).state_dict) == before, "weights changed"

@@ -46,7 +46,7 @@ def test_real_validation_edges_choose_the_cut_when_each_class_has_enough(logs):
     assert calibration_mask(_edges(paths[1:]), labels[1:]).all()
 
 
-def test_calibrate_takes_cut_figures_and_curve_from_the_rows_given():
+def test_cut_and_its_figures_from_the_real_rows_the_curve_from_all():
     # Real logs' rows: successes from p 0.2 up, failures to 0.15: cuts 0.16–0.20 are all
     # right, and ties go to the one nearest 0.5. With the simulated rows (failures up to
     # 0.45) it would be 0.46.
@@ -54,10 +54,14 @@ def test_calibrate_takes_cut_figures_and_curve_from_the_rows_given():
     real_y = np.r_[np.ones(40, bool), np.zeros(40, bool)]
     sim_p = np.r_[np.linspace(0.5, 0.9, 200), np.linspace(0.3, 0.45, 100)]
     sim_y = np.r_[np.ones(200, bool), np.zeros(100, bool)]
+    labels, probs = np.r_[real_y, sim_y], np.r_[real_p, sim_p]
+    real = np.r_[np.ones(80, bool), np.zeros(300, bool)]
     checkpoint = Checkpoint("score")
-    calibrate(checkpoint, real_y, real_p)
+    calibrate(checkpoint, labels, probs, real)
     assert checkpoint.threshold == pytest.approx(0.2)
-    assert checkpoint.metrics["tp"] + checkpoint.metrics["fn"] == 40
-    assert checkpoint.curve is not None and checkpoint.curve.precision[-1] == 1.0
-    calibrate(checkpoint, np.r_[real_y, sim_y], np.r_[real_p, sim_p])
+    assert checkpoint.metrics["n"] == 80 and checkpoint.metrics["accuracy"] == 1.0
+    # The curve holds every row: at its lowest cut, recall 1 and the whole set's precision.
+    assert checkpoint.curve is not None
+    assert checkpoint.curve.precision[0] == pytest.approx(240 / 380)
+    calibrate(checkpoint, labels, probs, np.ones(380, bool))
     assert checkpoint.threshold == pytest.approx(0.46)

@@ -212,7 +212,7 @@ def train(
     else:
         checkpoint, val_p = _fit_network(rows, config, progress, log, resume)
     real = calibration_mask([data.edges[i] for i in val_idx], data.labels[val_idx])
-    calibrate(checkpoint, data.labels[val_idx][real], val_p[real])
+    calibrate(checkpoint, data.labels[val_idx], val_p, real)
     checkpoint.training = {
         "files": data.files,
         "counts": counts,
