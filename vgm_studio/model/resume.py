@@ -83,6 +83,6 @@ def load_run(path: Path, key: str) -> RunState | None:
         state = RunState(**raw)
     except Exception as exc:  # any unreadable file gets the same message
         raise InputError(
-            path, f"not a training run state ({exc}); delete it to start over"
+            path, f"not a training run state ({type(exc).__name__}); delete it to start over"
         ) from None
     return state if state.key == key else None
