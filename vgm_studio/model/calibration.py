@@ -5,7 +5,7 @@ class mix and noise are ours, not a robot's; a model meets real logs. So the cut
 validation accuracy) is taken from the validation edges of real logs when each class has
 enough of them there, and from all validation edges otherwise. The precision curve behind
 ``--loop-precision`` keeps every validation edge: a precision of 0.99 is estimated from the
-failures above a cut, and the real logs alone hold a quarter of them; on the eleven held-out
+failures above a cut, and the real logs alone hold about a third of them; on the eleven held-out
 buildings the whole set's curve kept the same precision at a higher recall
 (BENCHMARKS.md, "Which validation edges choose the cut"). The weights and early stopping
 see every validation edge.
