@@ -33,6 +33,10 @@ def main() -> None:
     parser.add_argument("--epochs", type=int, default=5)
     parser.add_argument("--epoch-size", type=int, default=6144, help="Draws per epoch.")
     parser.add_argument("--threads", type=int, default=2, help="torch CPU threads.")
+    parser.add_argument("--lr", type=float, default=2e-3, help="Peak learning rate.")
+    parser.add_argument(
+        "--more", action="store_true", help="Go on from the shipped weights: a second schedule."
+    )
     args = parser.parse_args()
     if args.device == "cpu":
         pin_to_cores(args.threads)
@@ -43,6 +47,7 @@ def main() -> None:
     command += ["--model", "vgmnet-paper", "--batch-size", "128", "--patience", "99"]
     command += ["--epochs", str(args.epochs), "--epoch-size", str(args.epoch_size)]
     command += ["--device", args.device, "--threads", str(args.threads), "--out", str(BUILT)]
+    command += ["--lr", str(args.lr)] + (["--init", str(SHIPPED)] if args.more else [])
     subprocess.run(command, check=True)
     minutes = (time.perf_counter() - start) / 60
     size = BUILT.stat().st_size / 1e6

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -128,3 +130,40 @@ def test_paper_network_from_cells_is_its_dense_forward_and_gradient(training):
     assert float(dense.detach().std()) > 1e-3  # the pairs differ, so equal outputs say something
     for name, p in net.named_parameters():
         torch.testing.assert_close(p.grad, want[name], rtol=1e-8, atol=1e-9, msg=name)
+
+
+def _labelled(count: int, seed: int):
+    from vgm_studio.matching.edges import Edge
+    from vgm_studio.model.training import LabelledSet
+
+    samples, labels = matched_pairs(count, seed)
+    edges = [
+        Edge(f"e{k}", "robot.log", "sha", k, k + 1, 0.0, 0.0, "loop", [0, 0, 0], [0, 0, 0])
+        for k in range(count)
+    ]
+    return LabelledSet(edges, samples, labels, [])
+
+
+def test_a_run_starts_from_the_given_checkpoint_and_refuses_another_model(tmp_path):
+    from vgm_studio.model.checkpoint import load_checkpoint
+    from vgm_studio.model.training import TrainConfig, train
+
+    data = _labelled(48, seed=6)
+    quiet = {"progress": False, "log": lambda _line: None}
+    config = TrainConfig(epochs=1, epoch_size=32, batch_size=16, device="cpu")
+    first = train(data, config, tmp_path / "a.pt", **quiet)
+    # At a learning rate of 0 the weights the run starts from are the ones it ends with.
+    still = replace(config, lr=0.0, seed=9, init=str(tmp_path / "a.pt"))
+    again = train(data, still, tmp_path / "b.pt", **quiet)
+    fresh = train(data, replace(config, lr=0.0, seed=9), tmp_path / "c.pt", **quiet)
+    assert first.state_dict is not None and again.state_dict is not None
+    names = [n for n in first.state_dict if n.endswith(("weight", "bias"))]
+    for name in names:
+        torch.testing.assert_close(again.state_dict[name], first.state_dict[name])
+    assert any(not torch.equal(fresh.state_dict[n], first.state_dict[n]) for n in names)
+    assert load_checkpoint(tmp_path / "b.pt").training["config"]["init"] == str(tmp_path / "a.pt")
+    score = train(data, TrainConfig(model="score"), tmp_path / "s.pt", **quiet)
+    assert score.model == "score"
+    wrong = replace(config, init=str(tmp_path / "s.pt"))
+    with pytest.raises(InputError, match=r"s\.pt.*is a score checkpoint"):
+        train(data, wrong, tmp_path / "d.pt", **quiet)

@@ -23,7 +23,7 @@ from vgm_studio.errors import InputError
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge, read_edges
 from vgm_studio.model.calibration import calibrate, calibration_mask
-from vgm_studio.model.checkpoint import Checkpoint, save_checkpoint
+from vgm_studio.model.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from vgm_studio.model.features import PairSample, figures_matrix, load_samples
 from vgm_studio.model.fitting import Recipe, Rows, choose_threshold, fit_network
 from vgm_studio.model.registry import build_network, entry
@@ -60,6 +60,8 @@ class TrainConfig:
         seed: Seeds the split, the draws, the augmentation and the weights.
         device: ``auto``, ``cpu`` or ``cuda``.
         threads: torch CPU threads (None: torch's default).
+        init: A checkpoint of the same model and hyper-parameters whose weights the run
+            starts from (a second schedule on a slow network); None starts fresh.
         vgm: VGM parameters.
         hyper: Network hyper-parameters overriding the model's defaults.
     """
@@ -77,6 +79,7 @@ class TrainConfig:
     seed: int = 0
     device: str = "auto"
     threads: int | None = None
+    init: str | None = None
     vgm: VGMParams = field(default_factory=VGMParams)
     hyper: dict[str, Any] = field(default_factory=dict)
 
@@ -248,6 +251,8 @@ def _fit_network(
     p(success) on the validation rows."""
     device = pick_device(config.device)
     net, hyper = build_network(config.model, config.hyper)
+    if config.init is not None:
+        net.load_state_dict(_initial_weights(Path(config.init), config.model, hyper))
     net = net.to(device).to(memory_format=torch.channels_last)  # type: ignore[call-overload]
     spec = input_spec(config.model, hyper, config.vgm)
     fitted = fit_network(
@@ -262,3 +267,14 @@ def _fit_network(
         device=str(device),
     )
     return checkpoint, fitted.val_p
+
+
+def _initial_weights(path: Path, model: str, hyper: dict[str, Any]) -> dict[str, torch.Tensor]:
+    """The weights of the checkpoint at ``path``, refused unless it is ``model`` with
+    ``hyper``."""
+    start = load_checkpoint(path)
+    if start.model != model or start.hyper != hyper or start.state_dict is None:
+        raise InputError(
+            path, f"is a {start.model} checkpoint with other settings; --init needs a {model} one"
+        )
+    return start.state_dict

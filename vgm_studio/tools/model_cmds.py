@@ -47,6 +47,10 @@ def train(
     seed: Annotated[int, typer.Option(help="Seed for split, draws and weights.")] = 0,
     device: DeviceOpt = Device.auto,
     threads: Annotated[int | None, typer.Option(min=1, help="torch CPU threads.")] = None,
+    init: Annotated[
+        Path | None,
+        typer.Option(metavar="MODEL.pt", help="Start from this checkpoint's weights (same model)."),
+    ] = None,
 ) -> None:
     """Train a validator on labelled edges (ambiguous and unlabelled ones are left out)."""
     from vgm_studio.model.training import TrainConfig
@@ -67,6 +71,7 @@ def train(
         seed=seed,
         device=device.value,
         threads=threads,
+        init=None if init is None else str(init),
         hyper=entry(model).hyper(HyperFlags(figures, occupancy, spread)),
     )
     typer.echo(train_model(edges, out, config, warn=lambda line: typer.echo(line, err=True)))
