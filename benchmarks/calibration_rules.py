@@ -19,6 +19,7 @@ import numpy as np
 from _common import machine, pin_to_cores, table
 from bench_generalisation import BUILD, MODELS, buildings, subset
 from folds import make_folds
+from recalibrate import validation_rows
 
 
 def _judge(labels, probs, test_labels, test_probs) -> tuple[float, str]:
@@ -39,9 +40,8 @@ def main() -> None:
     parser.add_argument("--models", default=",".join(MODELS))
     args = parser.parse_args()
     pin_to_cores(2)
-    from vgm_studio.model.calibration import calibration_mask
     from vgm_studio.model.checkpoint import load_checkpoint
-    from vgm_studio.model.training import read_labelled, stratified_split
+    from vgm_studio.model.training import read_labelled
     from vgm_studio.model.validator import Validator
 
     made, sims = buildings([])
@@ -58,15 +58,8 @@ def main() -> None:
             path = BUILD / "folds" / f"{fold.held_out}-{model}.pt"
             if not path.exists():
                 continue
-            config = load_checkpoint(path).training["config"]
-            _, val = stratified_split(
-                training.labels, training.groups, config["val_fraction"], config["seed"]
-            )
-            validator = Validator.load(path, device="cpu")
-            probs = validator.predict_samples([training.samples[i] for i in val])
-            test_probs = validator.predict_samples(test.samples)
-            labels = training.labels[val]
-            real = calibration_mask([training.edges[i] for i in val], labels)
+            labels, probs, real = validation_rows(path, load_checkpoint(path), training)
+            test_probs = Validator.load(path, device="cpu").predict_samples(test.samples)
             all_acc, all_rec = _judge(labels, probs, test.labels, test_probs)
             real_acc, real_rec = _judge(labels[real], probs[real], test.labels, test_probs)
             totals.setdefault(model, []).append((all_acc, real_acc))

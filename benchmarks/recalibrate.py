@@ -43,21 +43,13 @@ def _files(recorded: list[dict]) -> list[Path]:
     ]
 
 
-def recalibrate(path: Path, data=None) -> str:
-    """Applies the calibration rule to the checkpoint at ``path``; returns a report line.
-
-    ``data``: the labelled set it was trained on, when the caller has it read already.
-    """
-    from vgm_studio.model.calibration import calibrate, calibration_mask
-    from vgm_studio.model.checkpoint import load_checkpoint, save_checkpoint
-    from vgm_studio.model.metrics import binary_metrics
-    from vgm_studio.model.training import read_labelled, stratified_split
+def validation_rows(path: Path, checkpoint, data):
+    """The validation split of ``data`` the checkpoint at ``path`` was judged on, made again:
+    its labels, the checkpoint's p(success) there and the calibration rule's real rows."""
+    from vgm_studio.model.calibration import calibration_mask
+    from vgm_studio.model.training import stratified_split
     from vgm_studio.model.validator import Validator
 
-    checkpoint = load_checkpoint(path)
-    before = _state_hash(checkpoint.state_dict)
-    if data is None:
-        data = read_labelled(_files(checkpoint.training["files"]), progress=False)
     config = checkpoint.training["config"]
     _, val = stratified_split(data.labels, data.groups, config["val_fraction"], config["seed"])
     labels = data.labels[val]
@@ -65,8 +57,28 @@ def recalibrate(path: Path, data=None) -> str:
     if counts != checkpoint.training["counts"]["validation"]:
         raise SystemExit(f"{path}: validation split not reproduced ({counts}); left as it was")
     probs = Validator.load(path, device="cpu").predict_samples([data.samples[i] for i in val])
-    real = calibration_mask([data.edges[i] for i in val], labels)
-    was = real if "calibration_edges" in checkpoint.training else real | True
+    return labels, probs, calibration_mask([data.edges[i] for i in val], labels)
+
+
+def recalibrate(path: Path, data=None) -> str:
+    """Applies the calibration rule to the checkpoint at ``path``; returns a report line.
+
+    ``data``: the labelled set it was trained on, when the caller has it read already.
+    """
+    import numpy as np
+
+    from vgm_studio.model.calibration import calibrate
+    from vgm_studio.model.checkpoint import load_checkpoint, save_checkpoint
+    from vgm_studio.model.metrics import binary_metrics
+    from vgm_studio.model.training import read_labelled
+
+    checkpoint = load_checkpoint(path)
+    before = _state_hash(checkpoint.state_dict)
+    if data is None:
+        data = read_labelled(_files(checkpoint.training["files"]), progress=False)
+    labels, probs, real = validation_rows(path, checkpoint, data)
+    # Checkpoints from before the rule were judged on every validation edge.
+    was = real if "calibration_edges" in checkpoint.training else np.ones_like(real)
     again = binary_metrics(labels[was], probs[was], checkpoint.threshold)
     if any(again[k] != checkpoint.metrics[k] for k in KEYS):
         raise SystemExit(f"{path}: recorded validation figures not reproduced; left as it was")
@@ -76,8 +88,9 @@ def recalibrate(path: Path, data=None) -> str:
     save_checkpoint(path, checkpoint)
     assert _state_hash(load_checkpoint(path).state_dict) == before, "weights changed"
     return (
-        f"{path.name}: split of {len(val)} reproduced; cut {old:.2f} → {checkpoint.threshold:.2f} "
-        f"chosen on {int(real.sum())} real logs' edges; weights unchanged ({before[:12]})"
+        f"{path.name}: split of {len(labels)} reproduced; cut {old:.2f} → "
+        f"{checkpoint.threshold:.2f} chosen on {int(real.sum())} real logs' edges; weights "
+        f"unchanged ({before[:12]})"
     )
 
 
