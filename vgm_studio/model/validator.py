@@ -128,10 +128,8 @@ def network_logits(
     dense VGMs: the paper's network always (the same function, at a fraction of the cost);
     the folded VGMNet at inference, where its stem folds into one affine map.
     """
-    cells_path = spec.kind == "vgm" and (
-        isinstance(net, VGMNetPaper) or (isinstance(net, VGMNet) and spec.fold > 1)
-    )
-    if cells_path and not (isinstance(net, VGMNet) and net.training):
+    folded_eval = isinstance(net, VGMNet) and spec.fold > 1 and not net.training
+    if spec.kind == "vgm" and (isinstance(net, VGMNetPaper) or folded_eval):
         return _cells_logits(net, spec, samples, device, rotations)
     x, extra = spec.tensors(samples, device, rotations)
     return forward(net, x, extra)
