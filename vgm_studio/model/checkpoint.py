@@ -63,6 +63,12 @@ class Checkpoint:
     created: str = field(default_factory=_now)
     curve: PrecisionCurve | None = None
 
+    def starts(self, model: str, hyper: dict[str, Any]) -> dict[str, torch.Tensor] | None:
+        """Its weights, when they fit a ``model`` network built with ``hyper`` (a warm
+        start); None when it is another model or other settings."""
+        same = self.model == model and self.hyper == hyper
+        return self.state_dict if same else None
+
     def to_dict(self) -> dict[str, Any]:
         """The on-disk layout."""
         out: dict[str, Any] = {"format": FORMAT, **self.__dict__, "vgm": asdict(self.vgm)}

@@ -273,8 +273,9 @@ def _initial_weights(path: Path, model: str, hyper: dict[str, Any]) -> dict[str,
     """The weights of the checkpoint at ``path``, refused unless it is ``model`` with
     ``hyper``."""
     start = load_checkpoint(path)
-    if start.model != model or start.hyper != hyper or start.state_dict is None:
+    weights = start.starts(model, hyper)
+    if weights is None:
         raise InputError(
             path, f"is a {start.model} checkpoint with other settings; --init needs a {model} one"
         )
-    return start.state_dict
+    return weights

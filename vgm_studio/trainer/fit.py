@@ -108,10 +108,10 @@ def fit(
     torch.manual_seed(config.seed)
     # Built on the CPU and trained there: beside the app, the GPU, if any, is not ours to take.
     net, hyper = build_network(MODEL, config.hyper)
-    warm = init is not None and init.model == MODEL and init.hyper == hyper
-    if warm:
-        assert init is not None and init.state_dict is not None
-        net.load_state_dict(init.state_dict)
+    weights = init.starts(MODEL, hyper) if init is not None else None
+    warm = weights is not None
+    if weights is not None:
+        net.load_state_dict(weights)
     net = net.to(memory_format=torch.channels_last)  # type: ignore[call-overload]
     spec = input_spec(MODEL, hyper, config.vgm)
     rows = Rows(samples, labels, train_idx, held_idx)
