@@ -82,6 +82,26 @@ def test_sequential_edges_are_found_where_the_odometry_jumps(office):
     assert kept[~jumped].all() and (~kept[jumped]).mean() > 0.5
 
 
+def test_a_keyframe_whose_odometry_alone_is_off_is_matched_on_both_sides(office):
+    """One keyframe in nine is placed 40° and 0.8 m off by its odometry (a scan stamped mid
+    turn): both steps it joins are off, in opposite directions. The step after it must be
+    searched against a submap that places that keyframe by its new match, not by the wrong
+    first one, and both wide matches must go in together."""
+    log = open_log(office)
+    truth_all = np.array([s.reference for s in log.scans])
+    keyframes = select_keyframes(truth_all, 0.5, 20.0)[:60]
+    scans = [log.scans[i] for i in keyframes]
+    truth = truth_all[keyframes]
+    odometry = truth.copy()
+    glitched = np.arange(len(truth)) % 9 == 4
+    odometry[glitched] = se2.compose(truth[glitched], np.array([0.8, 0.0, math.radians(40.0)]))
+
+    errors, kept = _sequential(scans, truth, odometry, FrontEndConfig(loop_min_gap=1000))
+    wrong = (errors[:, 0] > 0.05) | (errors[:, 1] > math.radians(1.0))
+    assert glitched.sum() >= 6
+    assert kept.all() and not wrong.any(), np.flatnonzero(wrong | ~kept)
+
+
 def test_wheel_less_odometry_over_sparse_scans_follows_the_robot(tmp_path):
     path = simulate(
         SimConfig(preset="repetitive", seed=5, num_beams=181, scan_spacing=1.0, laps=0.5),

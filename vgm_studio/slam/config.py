@@ -47,6 +47,10 @@ class FrontEndConfig:
             (``GraphConfig``) weight edges against each other and are far wider than a
             scan matcher drifts, which would make every window the widest.
         drift_sigma_theta_deg: …and in heading, degrees.
+        drift_odometry_sigma_xy: How far the odometry of a rejected sequential step may be
+            off, as the loop search sees it, metres per metre (the graph's own fallback,
+            ``GraphConfig.odometry_sigma_xy``, is far wider).
+        drift_odometry_sigma_theta_deg: …and in heading, degrees.
         prefer_estimate: A loop is first matched in the smallest window around the estimate;
             the full window's pose replaces it only if it scores this much higher (relative):
             along a corridor or past a row of doors the full window holds poses that score
@@ -100,6 +104,8 @@ class FrontEndConfig:
     place_angular_deg: float = 15.0
     drift_sigma_xy: float = 0.005
     drift_sigma_theta_deg: float = 0.03
+    drift_odometry_sigma_xy: float = 0.05
+    drift_odometry_sigma_theta_deg: float = 2.0
     prefer_estimate: float = 0.1
     loop_min_score: float = 0.3
     sequential_submap: int = 5

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -53,3 +54,7 @@ class SlamEdge:
     @property
     def estimate(self) -> NDArray[np.float64]:
         return np.asarray(self.match.estimate, dtype=np.float64)
+
+
+# Sets ``p_success``, ``validated`` and ``kept`` on a batch of edges.
+Validate = Callable[[Sequence[SlamEdge]], None]

@@ -13,6 +13,7 @@ next block.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -29,15 +30,15 @@ from vgm_studio.graph.config import GraphConfig
 from vgm_studio.graph.pose_graph import GraphEdge, RunningEstimate, edge_covariance
 from vgm_studio.matching.correlative import CorrelativeConfig, LoopMatcher, SearchWindow
 from vgm_studio.matching.descriptor import PlaceIndex
-from vgm_studio.matching.matcher import MatchResult, ScanMatcher
+from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.matching.submap import Submap
 from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
 from vgm_studio.slam.consistency import Loop, consistent
-from vgm_studio.slam.edges import SlamEdge, SlamEdgeKind
+from vgm_studio.slam.edges import SlamEdge, SlamEdgeKind, Validate
 from vgm_studio.slam.loop_search import Candidate, place_candidates, window_candidates
+from vgm_studio.slam.sequential import SequentialMatcher
 from vgm_studio.slam.uncertainty import UncertaintyGraph
 
-Validate = Callable[[Sequence[SlamEdge]], None]
 _T = TypeVar("_T")
 
 
@@ -125,7 +126,9 @@ class FrontEnd:
         self._places = PlaceIndex()
         self.loop_matcher = LoopMatcher(CorrelativeConfig(min_score=config.loop_min_score))
         self._submaps: dict[tuple[int, int, int], Submap] = {}
-        self._sequential_submaps: dict[int, Submap] = {}
+        self._sequential_matcher = SequentialMatcher(
+            scans, odometry, matcher, self.loop_matcher, config
+        )
         self._threads = config.threads or match_threads()
         self._pool: ThreadPoolExecutor | None = None
         self.estimate = RunningEstimate(odometry[0], graph)
@@ -173,109 +176,24 @@ class FrontEnd:
     def _sequential(self, block: range) -> None:
         odo = self.odometry
         if self.config.sequential_submap > 0:
-            edges = self._sequential_on_submaps(block)
+            edges = self._sequential_matcher.match(block, self.estimate.poses)
         else:
             edges = [
                 self._match("sequential", k - 1, k, se2.between(odo[k - 1], odo[k])) for k in block
             ]
         self.validate(edges)
-        if self.config.sequential_retry and self._sequential_submaps:
-            self._retry_rejected(edges)
+        if self.config.sequential_retry and self.config.sequential_submap > 0:
+            self._sequential_matcher.retry(edges, self.validate)
         for e in edges:
             factor = (
                 graph_edge(e, self.graph) if e.kept else odometry_edge(e.a, e.b, odo, self.graph)
             )
             self.estimate.add_keyframe(se2.compose(self.estimate.poses[e.a], factor.measurement))
             self.estimate.add_edge(factor)
-            self._uncertainty.add(self._drift(e) if e.kept else factor)
+            self._uncertainty.add(self._drift(e) if e.kept else self._drift_odometry(e))
             self._graph_uncertainty.add(factor)
         self.edges.extend(edges)
         self.estimate.update()
-
-    def _sequential_on_submaps(self, block: range) -> list[SlamEdge]:
-        """Each keyframe matched against a submap of the last ones, in the frame of the one
-        before it, from the odometry's step within the smallest loop window."""
-        cfg = self.config
-        window = SearchWindow(cfg.window_linear[0], math.radians(cfg.window_angular_deg[0]))
-        # The block's keyframes are not in the estimate yet: chain their matches.
-        poses = {
-            k: self.estimate.poses[k]
-            for k in range(max(0, block.start - cfg.sequential_submap), block.start)
-        }
-        self._sequential_submaps.clear()
-        edges = []
-        for k in block:
-            members = range(max(0, k - cfg.sequential_submap), k)
-            local = se2.between(poses[k - 1], np.array([poses[j] for j in members]))
-            submap = Submap.from_scans([self.scans[j] for j in members], local)
-            self._sequential_submaps[k] = submap
-            guess = se2.between(self.odometry[k - 1], self.odometry[k])
-            result = self.loop_matcher.match(
-                submap, self.scans[k - 1], self.scans[k], guess, window
-            )
-            if result.covariance is None:
-                # Nothing scored (a scan that sees little): the pairwise matcher's answer.
-                result = self.matcher.match(self.scans[k - 1], self.scans[k], guess)
-            edges.append(SlamEdge("sequential", k - 1, k, guess, result))
-            poses[k] = se2.compose(poses[k - 1], edges[-1].estimate)
-        return edges
-
-    def _retry_rejected(self, edges: list[SlamEdge]) -> None:
-        """Sequential edges the validator rejected, matched again over the wide window; a
-        wide match that the validator keeps takes the rejected one's place.
-
-        The validator, not a fixed inlier share, says which matches are poor: the share a
-        right match keeps depends on the scanner and the building (median 0.8 on CSAIL,
-        0.5 on Acapulco), and the validator was trained on exactly these figures.
-        """
-        retried = []
-        for i, e in enumerate(edges):
-            if e.kept:
-                continue
-            wide = self._wider(self._sequential_submaps[e.b], e.b, e.guess, e.match)
-            if wide is not e.match:
-                retried.append((i, SlamEdge("sequential", e.a, e.b, e.guess, wide)))
-        if not retried:
-            return
-        self.validate([r for _, r in retried])
-        kept = {i: r for i, r in retried if r.kept}
-        # Where the odometry is wrong at one keyframe only (a scan stamped mid-turn), its
-        # error cancels over the two steps that keyframe joins; a matched step next to an
-        # odometry step would keep it. So a wide match goes in only between matched steps.
-        while lone := [i for i in kept if not self._matched_around(i, edges, kept)]:
-            for i in lone:
-                del kept[i]
-        for i, r in kept.items():
-            edges[i] = r
-
-    @staticmethod
-    def _matched_around(i: int, edges: list[SlamEdge], kept: dict[int, SlamEdge]) -> bool:
-        """Both neighbours of sequential edge i (in its block) are kept or being kept."""
-        return all(edges[j].kept or j in kept for j in (i - 1, i + 1) if 0 <= j < len(edges))
-
-    def _wider(
-        self, submap: Submap, k: int, guess: NDArray[np.float64], small: MatchResult
-    ) -> MatchResult:
-        """Keyframe k matched again over the wide window, around the odometry's step and
-        around standing still; ``small`` itself unless one of them is clearly better.
-
-        A rejected small-window match often means the odometry's step is off by more than
-        the small window (kiss-icp lost, wheels slipping). A lost odometry can be off by more
-        than the wide window too (kiss-icp carrying a wrong speed down a corridor), but the
-        robot itself rarely moves more than the wide window between keyframes, so the window
-        around standing still holds the true step whatever the odometry says. A wide match
-        must put clearly more of the scan on the keyframe than the small one: along a
-        corridor the wide window holds poses that fit nearly as well as the right one.
-        """
-        cfg = self.config
-        wide = SearchWindow(cfg.window_linear[1], math.radians(cfg.sequential_wide_angular_deg))
-        best = small
-        bar = small.inlier_ratio + cfg.sequential_retry_gain if small.covariance is not None else 0
-        for centre in (guess, np.zeros(3)):
-            far = self.loop_matcher.match(submap, self.scans[k - 1], self.scans[k], centre, wide)
-            if far.covariance is not None and far.inlier_ratio >= bar:
-                best, bar = far, far.inlier_ratio
-        return best
 
     def _loops(self, block: range) -> None:
         # Submaps are placed by the estimate, which moves when loops close: built per block.
@@ -375,6 +293,18 @@ class FrontEnd:
         for e, ok in zip(loops, flags, strict=True):
             e.consistency = "kept" if ok else "rejected"
             e.kept = bool(ok)
+
+    def _drift_odometry(self, edge: SlamEdge) -> GraphEdge:
+        """A rejected sequential step's odometry as the loop search sees it: narrower than
+        the graph's (wide) fallback. Windows widened over every doubted step would hold
+        aliases, and so would a surprise test that any doubted step explains (CSAIL: one
+        alias 14 m off passed alone); where the odometry was truly lost, place recognition
+        finds the revisit, and the graph's wide fallback lets those loops pull it straight."""
+        floor = (self.config.drift_odometry_sigma_xy, self.config.drift_odometry_sigma_theta_deg)
+        narrow = dataclasses.replace(
+            self.graph, odometry_sigma_xy=floor[0], odometry_sigma_theta_deg=floor[1]
+        )
+        return odometry_edge(edge.a, edge.b, self.odometry, narrow)
 
     def _drift(self, edge: SlamEdge) -> GraphEdge:
         """A kept sequential edge as the loop search sees it: the matcher's covariance plus a

@@ -1,0 +1,201 @@
+"""Sequential edges: each keyframe matched against a submap of the last ones, and matched
+again over a wide window where the validator rejected it.
+
+A block's keyframes are not in the running estimate yet, so their submaps are placed by
+chaining the block's own matches. A wrong match therefore also misplaces the keyframe in the
+next one's submap; the second search chains the wide matches it finds, so that a keyframe
+after a wrong one is searched against a submap that holds together (Belgioioso keyframes
+300–302: the odometry 47° off at one keyframe, the wide match of the first step right, that
+of the second lost against a submap turned by the first's wrong match).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vgm_studio.core import se2
+from vgm_studio.datasets.scans import Scan
+from vgm_studio.matching.correlative import LoopMatcher, SearchWindow
+from vgm_studio.matching.matcher import MatchResult, ScanMatcher
+from vgm_studio.matching.submap import Submap
+from vgm_studio.slam.config import FrontEndConfig
+from vgm_studio.slam.edges import SlamEdge, Validate
+
+Poses = dict[int, NDArray[np.float64]]
+
+
+class SequentialMatcher:
+    """Matches a block's sequential edges and searches the rejected ones again.
+
+    Args:
+        scans: The keyframes' scans.
+        odometry: (K, 3) odometry poses of the keyframes.
+        matcher: The pairwise matcher, for a scan the submap search finds nothing for.
+        loop_matcher: The correlative matcher.
+        config: The submap size and the windows.
+    """
+
+    def __init__(
+        self,
+        scans: Sequence[Scan],
+        odometry: NDArray[np.float64],
+        matcher: ScanMatcher,
+        loop_matcher: LoopMatcher,
+        config: FrontEndConfig,
+    ) -> None:
+        self.scans, self.odometry, self.config = scans, odometry, config
+        self.matcher, self.loop_matcher = matcher, loop_matcher
+        self._start: Poses = {}
+        self._submaps: dict[int, Submap] = {}
+
+    def match(self, block: range, estimate: NDArray[np.float64]) -> list[SlamEdge]:
+        """Each keyframe of ``block`` against a submap of the last ones, in the frame of the
+        one before it, from the odometry's step within the smallest loop window.
+
+        Args:
+            block: The keyframes to match, each to the one before it.
+            estimate: The running estimate of the keyframes before the block.
+        """
+        cfg = self.config
+        window = SearchWindow(cfg.window_linear[0], math.radians(cfg.window_angular_deg[0]))
+        first = max(0, block.start - cfg.sequential_submap)
+        self._start = {k: estimate[k] for k in range(first, block.start)}
+        poses = dict(self._start)
+        self._submaps.clear()
+        edges = []
+        for k in block:
+            submap = self._submap(k, poses)
+            self._submaps[k] = submap
+            guess = se2.between(self.odometry[k - 1], self.odometry[k])
+            result = self.loop_matcher.match(
+                submap, self.scans[k - 1], self.scans[k], guess, window
+            )
+            if result.covariance is None:
+                # Nothing scored (a scan that sees little): the pairwise matcher's answer.
+                result = self.matcher.match(self.scans[k - 1], self.scans[k], guess)
+            edges.append(SlamEdge("sequential", k - 1, k, guess, result))
+            poses[k] = se2.compose(poses[k - 1], edges[-1].estimate)
+        return edges
+
+    def retry(self, edges: list[SlamEdge], validate: Validate) -> None:
+        """Sequential edges the validator rejected, matched again over the wide window; a
+        wide match that the validator keeps takes the rejected one's place.
+
+        The validator, not a fixed inlier share, says which matches are poor: the share a
+        right match keeps depends on the scanner and the building (median 0.8 on CSAIL,
+        0.5 on Acapulco), and the validator was trained on exactly these figures.
+        """
+        retried: dict[int, SlamEdge] = {}
+        poses = dict(self._start)
+        for i, e in enumerate(edges):
+            if not e.kept:
+                # After a step searched again, the submap is placed by that step's new match.
+                submap = self._submap(e.b, poses) if retried else self._submaps[e.b]
+                small = self._small(submap, e) if retried else e.match
+                wide = self._wider(submap, e.b, e.guess, small)
+                if wide is not e.match:
+                    retried[i] = SlamEdge("sequential", e.a, e.b, e.guess, wide)
+            poses[e.b] = se2.compose(poses[e.a], retried.get(i, e).estimate)
+        if not retried:
+            return
+        validate(list(retried.values()))
+        kept = {i: r for i, r in retried.items() if r.kept}
+        while lone := [i for i in kept if not self._bridged(i, edges, kept, poses)]:
+            for i in lone:
+                del kept[i]
+        for i, r in kept.items():
+            edges[i] = r
+
+    def _bridged(
+        self, i: int, edges: list[SlamEdge], kept: dict[int, SlamEdge], poses: Poses
+    ) -> bool:
+        """Whether wide match i may go in beside its neighbours.
+
+        Where the odometry is wrong at one keyframe only (a scan stamped mid-turn), its error
+        cancels over the two steps that keyframe joins; a matched step next to an odometry
+        step would keep it. So next to a step left to the odometry, a wide match goes in only
+        where a third match, of the keyframes either side of both steps, agrees with it
+        rather than with the odometry (Belgioioso keyframes 73–75: a right match the
+        validator doubted, p 0.25, left the next step's right wide match out, and its
+        odometry, 38° off, in).
+        """
+        for j in (i - 1, i + 1):
+            if not 0 <= j < len(edges) or edges[j].kept or j in kept:
+                continue
+            first, second = sorted((i, j))
+            a, c = edges[first].a, edges[second].b
+            odometry = se2.between(self.odometry[a], self.odometry[c])
+            steps = [kept[n].estimate if n == i else edges[n].guess for n in (first, second)]
+            with_match = se2.compose(steps[0], steps[1])
+            across = self._across(a, c, (with_match, odometry), poses)
+            if across is None or _gap(across, with_match) >= _gap(across, odometry):
+                return False
+        return True
+
+    def _across(
+        self, a: int, c: int, centres: tuple[NDArray[np.float64], ...], poses: Poses
+    ) -> NDArray[np.float64] | None:
+        """Keyframe c matched against the submap of the keyframes up to a, over the wide
+        window around each centre: the best-scoring estimate, None where none scores."""
+        cfg = self.config
+        wide = SearchWindow(cfg.window_linear[1], math.radians(cfg.sequential_wide_angular_deg))
+        submap = self._submap(a + 1, poses)
+        found = [
+            self.loop_matcher.match(submap, self.scans[a], self.scans[c], centre, wide)
+            for centre in centres
+        ]
+        scored = [m for m in found if m.covariance is not None]
+        if not scored:
+            return None
+        return np.asarray(max(scored, key=lambda m: m.score or 0.0).estimate, dtype=np.float64)
+
+    def _submap(self, k: int, poses: Poses) -> Submap:
+        """The last keyframes before k, placed by ``poses`` in the frame of k - 1."""
+        members = range(max(0, k - self.config.sequential_submap), k)
+        local = se2.between(poses[k - 1], np.array([poses[j] for j in members]))
+        return Submap.from_scans([self.scans[j] for j in members], local)
+
+    def _small(self, submap: Submap, edge: SlamEdge) -> MatchResult:
+        """``edge`` matched again in the smallest window, against a submap placed anew; the
+        first match where this one scores nothing."""
+        cfg = self.config
+        window = SearchWindow(cfg.window_linear[0], math.radians(cfg.window_angular_deg[0]))
+        again = self.loop_matcher.match(
+            submap, self.scans[edge.a], self.scans[edge.b], edge.guess, window
+        )
+        return again if again.covariance is not None else edge.match
+
+    def _wider(
+        self, submap: Submap, k: int, guess: NDArray[np.float64], small: MatchResult
+    ) -> MatchResult:
+        """Keyframe k matched again over the wide window, around the odometry's step and
+        around standing still; ``small`` itself unless one of them is clearly better.
+
+        A rejected small-window match often means the odometry's step is off by more than
+        the small window (kiss-icp lost, wheels slipping). A lost odometry can be off by more
+        than the wide window too (kiss-icp carrying a wrong speed down a corridor), but the
+        robot itself rarely moves more than the wide window between keyframes, so the window
+        around standing still holds the true step whatever the odometry says. A wide match
+        must put clearly more of the scan on the keyframe than the small one: along a
+        corridor the wide window holds poses that fit nearly as well as the right one.
+        """
+        cfg = self.config
+        wide = SearchWindow(cfg.window_linear[1], math.radians(cfg.sequential_wide_angular_deg))
+        best = small
+        bar = small.inlier_ratio + cfg.sequential_retry_gain if small.covariance is not None else 0
+        for centre in (guess, np.zeros(3)):
+            far = self.loop_matcher.match(submap, self.scans[k - 1], self.scans[k], centre, wide)
+            if far.covariance is not None and far.inlier_ratio >= bar:
+                best, bar = far, far.inlier_ratio
+        return best
+
+
+def _gap(p: NDArray[np.float64], q: NDArray[np.float64]) -> float:
+    """How far two relative poses are apart: metres plus radians (keyframes sit about a metre
+    apart, so a radian there moves the next one by about a metre)."""
+    d = se2.between(p, q)
+    return float(math.hypot(d[0], d[1]) + abs(d[2]))
