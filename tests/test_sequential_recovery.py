@@ -20,11 +20,14 @@ from vgm_studio.core import se2
 from vgm_studio.datasets import open_log
 from vgm_studio.graph.config import GraphConfig
 from vgm_studio.matching.candidates import select_keyframes
+from vgm_studio.matching.correlative import CorrelativeConfig, LoopMatcher
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.simulation.simulate import SimConfig, simulate
 from vgm_studio.slam.config import FrontEndConfig, ValidationConfig
+from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.frontend import FrontEnd
 from vgm_studio.slam.odometry import Recovery, scan_odometry
+from vgm_studio.slam.sequential import SequentialMatcher
 from vgm_studio.slam.validation import EdgeValidator
 
 # Every JUMP-th step of the odometry is off by this (x, y metres, θ radians).
@@ -100,6 +103,40 @@ def test_a_keyframe_whose_odometry_alone_is_off_is_matched_on_both_sides(office)
     wrong = (errors[:, 0] > 0.05) | (errors[:, 1] > math.radians(1.0))
     assert glitched.sum() >= 6
     assert kept.all() and not wrong.any(), np.flatnonzero(wrong | ~kept)
+
+
+def test_a_match_that_slid_out_of_its_window_goes_out_where_the_odometry_explains_it(office):
+    """A kept match 0.6 m along from a right odometry step is taken out, and a right match
+    0.6 m from a wrong odometry step stays: a match across two steps says which."""
+    log = open_log(office)
+    truth_all = np.array([s.reference for s in log.scans])
+    keyframes = select_keyframes(truth_all, 0.5, 20.0)[:30]
+    scans = [log.scans[i] for i in keyframes]
+    truth = truth_all[keyframes]
+    config = FrontEndConfig()
+    matcher = SequentialMatcher(
+        scans, truth, ScanMatcher(), LoopMatcher(CorrelativeConfig(min_score=0.3)), config
+    )
+    along = np.array([0.6, 0.0, 0.0])
+
+    def block_with(i: int, slid: bool) -> list[SlamEdge]:
+        edges = matcher.match(range(1, 20), truth)
+        e = edges[i]
+        step = se2.between(truth[e.a], truth[e.b])
+        if slid:  # the match walked off; the odometry is right
+            e.match = dataclasses.replace(e.match, estimate=se2.compose(step, along))
+        else:  # the odometry slipped; the match is right
+            e.guess = se2.compose(step, along)
+        return edges
+
+    edges = block_with(8, slid=True)
+    matcher.check_slides(edges)
+    assert [e.kept for e in edges] == [i != 8 for i in range(len(edges))]
+    assert edges[8].consistency == "rejected" and edges[8].validated
+
+    edges = block_with(8, slid=False)
+    matcher.check_slides(edges)
+    assert all(e.kept for e in edges)
 
 
 def test_wheel_less_odometry_over_sparse_scans_follows_the_robot(tmp_path):

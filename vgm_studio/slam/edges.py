@@ -35,8 +35,9 @@ class SlamEdge:
             did not reject it.
         source: Where the candidate came from.
         validated: The validator's own decision (``kept`` before the consistency check).
-        consistency: The group-consistency check's decision on a loop the validator kept;
-            ``not-checked`` for sequential edges and for loops the validator rejected.
+        consistency: The group-consistency check's decision on a loop the validator kept,
+            and ``rejected`` on a sequential edge the odometry check of a match that slid
+            outside its window took out; else ``not-checked``.
     """
 
     kind: SlamEdgeKind

@@ -60,6 +60,31 @@ def odometry_edge(a: int, b: int, odometry: NDArray[np.float64], config: GraphCo
     return GraphEdge(a, b, delta, cov, known_inlier=True)
 
 
+def fallback_edge(
+    edge: SlamEdge, odometry: NDArray[np.float64], graph: GraphConfig, front_end: FrontEndConfig
+) -> GraphEdge:
+    """The odometry that joins the keyframes of a sequential edge left out of the graph.
+
+    Wide (``graph.odometry_sigma_*``) where the validator rejected the match: there the
+    odometry disagreed with a scan match, and is often far off. Narrow
+    (``front_end.drift_odometry_sigma_*``) where the slide check took a kept match out: a
+    match across two steps confirmed the odometry there, and a wide step would leave the graph
+    unsure for nothing.
+    """
+    if edge.consistency == "rejected":
+        graph = narrow_odometry(graph, front_end)
+    return odometry_edge(edge.a, edge.b, odometry, graph)
+
+
+def narrow_odometry(graph: GraphConfig, front_end: FrontEndConfig) -> GraphConfig:
+    """``graph`` with the odometry σ the loop search reads."""
+    return dataclasses.replace(
+        graph,
+        odometry_sigma_xy=front_end.drift_odometry_sigma_xy,
+        odometry_sigma_theta_deg=front_end.drift_odometry_sigma_theta_deg,
+    )
+
+
 def match_threads() -> int:
     """Threads for loop matching: ``OMP_NUM_THREADS`` where set (a Ray worker holding one
     CPU gets 1), else the CPUs this process may run on, at most 4."""
@@ -182,12 +207,15 @@ class FrontEnd:
                 self._match("sequential", k - 1, k, se2.between(odo[k - 1], odo[k])) for k in block
             ]
         self.validate(edges)
+        if self.config.sequential_slide_check and self.config.sequential_submap > 0:
+            self._sequential_matcher.check_slides(edges)
         if self.config.sequential_retry and self.config.sequential_submap > 0:
             self._sequential_matcher.retry(edges, self.validate)
         for e in edges:
-            factor = (
-                graph_edge(e, self.graph) if e.kept else odometry_edge(e.a, e.b, odo, self.graph)
-            )
+            if e.kept:
+                factor = graph_edge(e, self.graph)
+            else:
+                factor = fallback_edge(e, odo, self.graph, self.config)
             self.estimate.add_keyframe(se2.compose(self.estimate.poses[e.a], factor.measurement))
             self.estimate.add_edge(factor)
             self._uncertainty.add(self._drift(e) if e.kept else self._drift_odometry(e))
@@ -300,10 +328,7 @@ class FrontEnd:
         aliases, and so would a surprise test that any doubted step explains (CSAIL: one
         alias 14 m off passed alone); where the odometry was truly lost, place recognition
         finds the revisit, and the graph's wide fallback lets those loops pull it straight."""
-        floor = (self.config.drift_odometry_sigma_xy, self.config.drift_odometry_sigma_theta_deg)
-        narrow = dataclasses.replace(
-            self.graph, odometry_sigma_xy=floor[0], odometry_sigma_theta_deg=floor[1]
-        )
+        narrow = narrow_odometry(self.graph, self.config)
         return odometry_edge(edge.a, edge.b, self.odometry, narrow)
 
     def _drift(self, edge: SlamEdge) -> GraphEdge:

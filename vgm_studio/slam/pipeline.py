@@ -16,7 +16,7 @@ from vgm_studio.matching.candidates import select_keyframes
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.slam.config import SlamConfig
 from vgm_studio.slam.edges import SlamEdge
-from vgm_studio.slam.frontend import FrontEnd, graph_edge, odometry_edge
+from vgm_studio.slam.frontend import FrontEnd, fallback_edge, graph_edge
 from vgm_studio.slam.odometry import scan_odometry
 from vgm_studio.slam.validation import EdgeValidator
 
@@ -173,7 +173,7 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
         if e.kept:
             after_edges.append(graph_edge(e, config.graph))
         elif e.kind == "sequential":
-            after_edges.append(odometry_edge(e.a, e.b, odo_kf, config.graph))
+            after_edges.append(fallback_edge(e, odo_kf, config.graph, config.front_end))
     after = optimize(running, after_edges, config.graph)
     seconds["back_end"] = time.perf_counter() - t
     return SlamResult(
