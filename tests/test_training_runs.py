@@ -11,6 +11,7 @@ import torch
 from vgm_studio.errors import InputError
 from vgm_studio.model.features import PairSample
 from vgm_studio.model.fitting import Recipe, Rows, fit_network
+from vgm_studio.model.precise_bn import precise_batch_norm
 from vgm_studio.model.registry import build_network
 from vgm_studio.model.validator import input_spec
 from vgm_studio.vgm import VGMParams
@@ -167,3 +168,37 @@ def test_a_run_starts_from_the_given_checkpoint_and_refuses_another_model(tmp_pa
     wrong = replace(config, init=str(tmp_path / "s.pt"))
     with pytest.raises(InputError, match=r"s\.pt.*is a score checkpoint"):
         train(data, wrong, tmp_path / "d.pt", **quiet)
+
+
+def test_precise_batch_norm_recomputes_the_statistics_and_leaves_the_learning_alone(rows):
+    """With ``bn_batches`` each validation reads batch norm's statistics recomputed over
+    training draws: the learnt weights are those of a run without it, to the bit (the draws
+    come from a generator of their own), and the buffers are the recomputed ones."""
+    recipe = Recipe(epochs=2, epoch_size=48, batch_size=16, patience=9, seed=5)
+    plain = _fit(rows, recipe)
+    precise = _fit(rows, replace(recipe, bn_batches=3))
+    buffers = {"running_mean", "running_var", "num_batches_tracked"}
+    moved = False
+    for name, weight in plain.state_dict.items():
+        if name.rsplit(".", 1)[-1] in buffers:
+            moved |= not torch.equal(precise.state_dict[name], weight)
+        else:
+            torch.testing.assert_close(precise.state_dict[name], weight, rtol=0, atol=0)
+    assert moved
+    # The buffers hold the plain average of the three batches' statistics.
+    torch.manual_seed(3)
+    net, hyper = build_network("vgmnet", {"figures": True})
+    net.load_state_dict(precise.state_dict)
+    spec = input_spec("vgmnet", hyper, VGMParams())
+    norms = [m for m in net.modules() if isinstance(m, torch.nn.BatchNorm2d)]
+    seen: list[torch.Tensor] = []
+    hook = norms[0].register_forward_hook(
+        lambda m, args, out: seen.append(args[0].mean(dim=(0, 2, 3)).detach())
+    )
+    batches = [rows.samples[i : i + 8] for i in (0, 8, 16)]
+    precise_batch_norm(net, spec, batches, [None] * 3, torch.device("cpu"))
+    hook.remove()
+    torch.testing.assert_close(norms[0].running_mean, torch.stack(seen).mean(0))
+    net.eval()
+    assert precise_batch_norm(net, spec, batches, [None] * 3, torch.device("cpu")) == len(norms)
+    assert not net.training

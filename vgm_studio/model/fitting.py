@@ -24,6 +24,7 @@ from tqdm import tqdm
 from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.model.features import PairSample
 from vgm_studio.model.metrics import binary_metrics
+from vgm_studio.model.precise_bn import precise_batch_norm
 from vgm_studio.model.resume import RunState, load_run, run_key, save_run
 from vgm_studio.model.validator import InputSpec, batched_logits, network_logits
 
@@ -43,6 +44,8 @@ class Recipe:
         patience: Stop after this many epochs without a better validation loss.
         augment: Turn each training pair by a random rigid rotation.
         seed: Seeds the draws and the rotations.
+        bn_batches: Before each validation, batch norm's statistics are recomputed over this
+            many batches of training draws (``precise_bn``); 0 keeps the running averages.
     """
 
     epochs: int = 12
@@ -53,12 +56,17 @@ class Recipe:
     patience: int = 4
     augment: bool = True
     seed: int = 0
+    bn_batches: int = 0
 
     @classmethod
     def of(cls, config: object) -> Recipe:
         """The recipe held by a config that names the same fields (``TrainConfig``, the
-        trainer's ``FitConfig``), so each spells its defaults but not the copy."""
-        return cls(**{f.name: getattr(config, f.name) for f in fields(cls)})
+        trainer's ``FitConfig``), so each spells its defaults but not the copy; a field the
+        config does not name keeps the recipe's default."""
+        defaults = cls()
+        return cls(
+            **{f.name: getattr(config, f.name, getattr(defaults, f.name)) for f in fields(cls)}
+        )
 
 
 @dataclass
@@ -290,12 +298,28 @@ class _Run:
             )
             bar.set_postfix(loss=f"{total / (step + 1):.3f}")
         record = {"epoch": epoch, "train_loss": total / self.steps}
+        if self.recipe.bn_batches:
+            self._precise_batch_norm(epoch)
         if len(self.val_labels):
             record |= _validation(
                 self.net, self.spec, self.val_samples, self.val_labels, self.device
             )
         record["seconds"] = time.perf_counter() - t0
         return record
+
+    def _precise_batch_norm(self, epoch: int) -> None:
+        """Batch norm's statistics recomputed over ``bn_batches`` batches of training
+        draws, from a generator of their own (seed, epoch): the run's draws, and a resumed
+        run, stay as they were."""
+        rng = np.random.default_rng([self.recipe.seed, epoch, 7])
+        rows, size = self.rows, self.recipe.batch_size
+        count = self.recipe.bn_batches * size
+        draws = rows.train[balanced_draws(rows.labels[rows.train], count, rng)]
+        batches = [[rows.samples[i] for i in draws[s : s + size]] for s in range(0, count, size)]
+        turns = [
+            rng.uniform(0, 2 * np.pi, len(b)) if self.recipe.augment else None for b in batches
+        ]
+        precise_batch_norm(self.net, self.spec, batches, turns, self.device)
 
 
 def _validation(

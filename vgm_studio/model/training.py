@@ -58,6 +58,8 @@ class TrainConfig:
             a CPU); None uses all.
         augment: Turn each training pair by a random rigid rotation.
         seed: Seeds the split, the draws, the augmentation and the weights.
+        bn_batches: Batches of training draws batch norm's statistics are recomputed over
+            before each validation (``model/precise_bn.py``); 0 keeps the running averages.
         device: ``auto``, ``cpu`` or ``cuda``.
         threads: torch CPU threads (None: torch's default).
         init: A checkpoint of the same model and hyper-parameters whose weights the run
@@ -77,6 +79,7 @@ class TrainConfig:
     max_train: int | None = None
     augment: bool = True
     seed: int = 0
+    bn_batches: int = 0
     device: str = "auto"
     threads: int | None = None
     init: str | None = None

@@ -45,6 +45,12 @@ def train(
         ),
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed for split, draws and weights.")] = 0,
+    bn_batches: Annotated[
+        int,
+        typer.Option(
+            min=0, help="Recompute batch norm's statistics over this many batches per epoch."
+        ),
+    ] = 0,
     device: DeviceOpt = Device.auto,
     threads: Annotated[int | None, typer.Option(min=1, help="torch CPU threads.")] = None,
     init: Annotated[
@@ -69,6 +75,7 @@ def train(
         max_train=max_train,
         augment=augment,
         seed=seed,
+        bn_batches=bn_batches,
         device=device.value,
         threads=threads,
         init=None if init is None else str(init),
