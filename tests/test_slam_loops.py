@@ -196,3 +196,30 @@ def test_a_loop_that_moves_the_map_past_the_drift_needs_a_group_that_agrees():
     place = [Loop(x.a, x.b, x.measurement, x.covariance, place=True) for x in loops]
     assert not consistent(place[:1], truth, wide, config, drift=drift)[0]
     assert consistent(place[:3], truth, wide, config, drift=drift).all()
+
+
+def test_two_groups_of_surprises_that_tell_two_stories_are_both_left_out():
+    """A periodic corridor: keyframes matched one period along agree with one another as well
+    as a true revisit's loops do. The ring is symmetric, so loops that claim b lies from
+    a + 6 where it truly lies from a are a consistent group, and a wrong one."""
+    truth = ring()
+    wide = chain(truth, LOOP_COV * 25)
+    drift = chain(truth, STEP_COV)
+    estimate = truth.copy()
+    estimate[60:, :2] += 1.5
+    config = ConsistencyConfig(min_support=2)
+
+    def place(a: int, claimed: int) -> Loop:
+        return Loop(claimed, a + 90, se2.between(truth[a], truth[a + 90]), LOOP_COV, place=True)
+
+    right = [place(a, a) for a in range(0, 14, 2)]  # seven
+    alias = [place(a, a + 6) for a in (1, 3, 5)]  # three, one period along
+    assert consistent(right[:3], estimate, wide, config, drift=drift).all()
+    assert consistent(alias, estimate, wide, config, drift=drift).all()  # alone, it would pass
+    # Three against three: neither story is taken.
+    assert not consistent(right[:3] + alias, estimate, wide, config, drift=drift).any()
+    # Seven against three: the revisit's run is kept, the aliases are not.
+    flags = consistent(right + alias, estimate, wide, config, drift=drift)
+    assert flags[: len(right)].all() and not flags[len(right) :].any()
+    # Two aliases would not pass on their own: no rival.
+    assert consistent(right[:3] + alias[:2], estimate, wide, config, drift=drift)[:3].all()

@@ -173,9 +173,10 @@ class ConsistencyConfig:
             symmetric hall matched to its mirror) agrees with itself and would outvote it.
         min_support: A loop that moves the map by more than the scan matchers drift, or one
             from place recognition, is kept only in a group of more than this many agreeing
-            loops (0: alone too). A revisit
-            after long drift yields a run of loops from consecutive keyframes; one convincing
-            alias in a corridor yields one.
+            loops (0: alone too), and only where the loops it outvoted hold no rival group of
+            more than this many that is at least half its size. A revisit after long drift
+            yields a run of loops from consecutive keyframes; one convincing alias in a
+            corridor yields one, a periodic corridor a rival run.
     """
 
     enabled: bool = True
