@@ -88,18 +88,17 @@ def consistent(
                 votes.add_edge(i, j)
     clique, _ = nx.max_weight_clique(votes, weight="weight")
     members = {i for i in clique if i != _ESTIMATE}
-    if drift is not None and members:
-        surprises = _surprises(loops, members, poses, drift, gate)
-        rivalled = _rivalled(votes, members, surprises, config.min_support)
-        if len(members) <= config.min_support or rivalled:
-            members -= surprises
+    # The drift's projection costs a Dijkstra pass: asked only where it could matter.
+    weak = len(members) <= config.min_support or _rivalled(votes, members, config.min_support)
+    if drift is not None and members and weak:
+        members -= _surprises(loops, members, poses, drift, gate)
     return np.array([i in members for i in range(len(loops))], dtype=bool)
 
 
-def _rivalled(votes: nx.Graph, members: set[int], surprises: set[int], support: int) -> bool:
+def _rivalled(votes: nx.Graph, members: set[int], support: int) -> bool:
     """Whether the loops left out hold a group that would pass on its own (more than
-    ``support`` loops) and is at least half as large as the one chosen, where the chosen one
-    moves the map by more than the drift (it has surprises).
+    ``support`` loops) and is at least half as large as the one chosen; if so, the chosen
+    group's surprises (the members that move the map by more than the drift) go out.
 
     Along a periodic corridor, one stretch matched one period along yields as long a run of
     agreeing loops as a revisit does, and so does a second period: the infinite corridor
@@ -108,7 +107,7 @@ def _rivalled(votes: nx.Graph, members: set[int], surprises: set[int], support: 
     a revisit goes on agreeing with itself in the next blocks.
     """
     rest = votes.subgraph(n for n in votes if n != _ESTIMATE and n not in members)
-    if not surprises or rest.number_of_nodes() == 0:
+    if rest.number_of_nodes() <= support:
         return False
     rival, _ = nx.max_weight_clique(rest, weight="weight")
     return len(rival) > support and 2 * len(rival) >= len(members)
