@@ -89,8 +89,11 @@ def consistent(
     clique, _ = nx.max_weight_clique(votes, weight="weight")
     members = {i for i in clique if i != _ESTIMATE}
     # The drift's projection costs a Dijkstra pass: asked only where it could matter.
-    weak = len(members) <= config.min_support or _rivalled(votes, members, config.min_support)
-    if drift is not None and members and weak:
+    if (
+        drift is not None
+        and members
+        and (len(members) <= config.min_support or _rivalled(votes, members, config.min_support))
+    ):
         members -= _surprises(loops, members, poses, drift, gate)
     return np.array([i in members for i in range(len(loops))], dtype=bool)
 
