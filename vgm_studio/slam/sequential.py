@@ -51,6 +51,12 @@ class SequentialMatcher:
         self.matcher, self.loop_matcher = matcher, loop_matcher
         self._start: Poses = {}
         self._submaps: dict[int, Submap] = {}
+        self._small_window = SearchWindow(
+            config.window_linear[0], math.radians(config.window_angular_deg[0])
+        )
+        self._wide_window = SearchWindow(
+            config.window_linear[1], math.radians(config.sequential_wide_angular_deg)
+        )
 
     def match(self, block: range, estimate: NDArray[np.float64]) -> list[SlamEdge]:
         """Each keyframe of ``block`` against a submap of the last ones, in the frame of the
@@ -60,9 +66,7 @@ class SequentialMatcher:
             block: The keyframes to match, each to the one before it.
             estimate: The running estimate of the keyframes before the block.
         """
-        cfg = self.config
-        window = SearchWindow(cfg.window_linear[0], math.radians(cfg.window_angular_deg[0]))
-        first = max(0, block.start - cfg.sequential_submap)
+        first = max(0, block.start - self.config.sequential_submap)
         self._start = {k: estimate[k] for k in range(first, block.start)}
         poses = dict(self._start)
         self._submaps.clear()
@@ -72,7 +76,7 @@ class SequentialMatcher:
             self._submaps[k] = submap
             guess = se2.between(self.odometry[k - 1], self.odometry[k])
             result = self.loop_matcher.match(
-                submap, self.scans[k - 1], self.scans[k], guess, window
+                submap, self.scans[k - 1], self.scans[k], guess, self._small_window
             )
             if result.covariance is None:
                 # Nothing scored (a scan that sees little): the pairwise matcher's answer.
@@ -96,7 +100,6 @@ class SequentialMatcher:
         odometry is off by more than the window, the match across agrees with the match (a
         search of its own neighbourhood alone did worse: Belgioioso 0.052 → 0.060 m).
         """
-        poses = self._chain(edges)
         for i, e in enumerate(edges):
             if not e.kept or self._inside(e):
                 continue
@@ -109,25 +112,17 @@ class SequentialMatcher:
             matched = se2.compose(edges[first].estimate, edges[second].estimate)
             steps = [edges[n].guess if n == i else edges[n].estimate for n in (first, second)]
             odometry = se2.compose(steps[0], steps[1])
-            across = self._across(a, c, (matched, odometry), poses)
+            # The block's submaps still hold as matched: each placed by the matches before it.
+            across = self._across(self._submaps[a + 1], a, c, (matched, odometry))
             if across is not None and _gap(across, odometry) < _gap(across, matched):
                 e.kept, e.consistency = False, "rejected"
 
     def _inside(self, edge: SlamEdge) -> bool:
         """Whether a match lies in the smallest window around its odometry step."""
-        cfg = self.config
         d = edge.estimate - edge.guess
         turn = abs(float(se2.wrap_angle(d[2])))
         linear = max(abs(d[0]), abs(d[1]))
-        small = math.radians(cfg.window_angular_deg[0])
-        return bool(linear <= cfg.window_linear[0] and turn <= small)
-
-    def _chain(self, edges: list[SlamEdge]) -> Poses:
-        """The block's keyframes placed by chaining its matches from the start poses."""
-        poses = dict(self._start)
-        for e in edges:
-            poses[e.b] = se2.compose(poses[e.a], e.estimate)
-        return poses
+        return bool(linear <= self._small_window.linear and turn <= self._small_window.angular)
 
     def retry(self, edges: list[SlamEdge], validate: Validate) -> None:
         """Sequential edges the validator rejected, matched again over the wide window; a
@@ -179,21 +174,19 @@ class SequentialMatcher:
             odometry = se2.between(self.odometry[a], self.odometry[c])
             steps = [kept[n].estimate if n == i else edges[n].guess for n in (first, second)]
             with_match = se2.compose(steps[0], steps[1])
-            across = self._across(a, c, (with_match, odometry), poses)
+            across = self._across(self._submap(a + 1, poses), a, c, (with_match, odometry))
             if across is None or _gap(across, with_match) >= _gap(across, odometry):
                 return False
         return True
 
     def _across(
-        self, a: int, c: int, centres: tuple[NDArray[np.float64], ...], poses: Poses
+        self, submap: Submap, a: int, c: int, centres: tuple[NDArray[np.float64], ...]
     ) -> NDArray[np.float64] | None:
-        """Keyframe c matched against the submap of the keyframes up to a, over the wide
-        window around each centre: the best-scoring estimate, None where none scores."""
-        cfg = self.config
-        wide = SearchWindow(cfg.window_linear[1], math.radians(cfg.sequential_wide_angular_deg))
-        submap = self._submap(a + 1, poses)
+        """Keyframe c matched against ``submap`` (the keyframes up to a, in a's frame), over
+        the wide window around each centre: the best-scoring estimate, None where none
+        scores."""
         found = [
-            self.loop_matcher.match(submap, self.scans[a], self.scans[c], centre, wide)
+            self.loop_matcher.match(submap, self.scans[a], self.scans[c], centre, self._wide_window)
             for centre in centres
         ]
         scored = [m for m in found if m.covariance is not None]
@@ -210,10 +203,8 @@ class SequentialMatcher:
     def _small(self, submap: Submap, edge: SlamEdge) -> MatchResult:
         """``edge`` matched again in the smallest window, against a submap placed anew; the
         first match where this one scores nothing."""
-        cfg = self.config
-        window = SearchWindow(cfg.window_linear[0], math.radians(cfg.window_angular_deg[0]))
         again = self.loop_matcher.match(
-            submap, self.scans[edge.a], self.scans[edge.b], edge.guess, window
+            submap, self.scans[edge.a], self.scans[edge.b], edge.guess, self._small_window
         )
         return again if again.covariance is not None else edge.match
 
@@ -231,12 +222,13 @@ class SequentialMatcher:
         must put clearly more of the scan on the keyframe than the small one: along a
         corridor the wide window holds poses that fit nearly as well as the right one.
         """
-        cfg = self.config
-        wide = SearchWindow(cfg.window_linear[1], math.radians(cfg.sequential_wide_angular_deg))
         best = small
-        bar = small.inlier_ratio + cfg.sequential_retry_gain if small.covariance is not None else 0
+        gain = self.config.sequential_retry_gain
+        bar = small.inlier_ratio + gain if small.covariance is not None else 0
         for centre in (guess, np.zeros(3)):
-            far = self.loop_matcher.match(submap, self.scans[k - 1], self.scans[k], centre, wide)
+            far = self.loop_matcher.match(
+                submap, self.scans[k - 1], self.scans[k], centre, self._wide_window
+            )
             if far.covariance is not None and far.inlier_ratio >= bar:
                 best, bar = far, far.inlier_ratio
         return best
