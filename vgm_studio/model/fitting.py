@@ -10,7 +10,7 @@ from __future__ import annotations
 import copy
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -271,20 +271,18 @@ class _Run:
     def epoch(self, epoch: int, progress: bool) -> dict[str, float]:
         """Trains one epoch of class-balanced draws; returns its losses and seconds."""
         t0 = time.perf_counter()
-        rows, size = self.rows, self.recipe.batch_size
+        rows = self.rows
         self.net.train()
-        draws = rows.train[balanced_draws(rows.labels[rows.train], self.per_epoch, self.rng)]
         bar = tqdm(
-            range(self.steps),
+            self._batches(self.per_epoch, self.rng),
+            total=self.steps,
             desc=f"epoch {epoch}/{self.recipe.epochs}",
             unit="batch",
             disable=None if progress else True,
             leave=False,
         )
         total = 0.0
-        for step in bar:
-            idx = draws[step * size : (step + 1) * size]
-            rot = self.rng.uniform(0, 2 * np.pi, len(idx)) if self.recipe.augment else None
+        for step, (idx, rot) in enumerate(bar):
             batch = [rows.samples[i] for i in idx]
             total += train_step(
                 self.net,
@@ -307,19 +305,25 @@ class _Run:
         record["seconds"] = time.perf_counter() - t0
         return record
 
+    def _batches(
+        self, count: int, rng: np.random.Generator
+    ) -> Iterator[tuple[NDArray[np.int64], NDArray[np.float64] | None]]:
+        """``count`` class-balanced training draws a batch at a time, each with its pairs'
+        rotations (None without augmentation), drawn from ``rng`` as the batches are taken."""
+        rows, size = self.rows, self.recipe.batch_size
+        draws = rows.train[balanced_draws(rows.labels[rows.train], count, rng)]
+        for start in range(0, count, size):
+            idx = draws[start : start + size]
+            yield idx, rng.uniform(0, 2 * np.pi, len(idx)) if self.recipe.augment else None
+
     def _precise_batch_norm(self, epoch: int) -> None:
         """Batch norm's statistics recomputed over ``bn_batches`` batches of training
         draws, from a generator of their own (seed, epoch): the run's draws, and a resumed
         run, stay as they were."""
         rng = np.random.default_rng([self.recipe.seed, epoch, 7])
-        rows, size = self.rows, self.recipe.batch_size
-        count = self.recipe.bn_batches * size
-        draws = rows.train[balanced_draws(rows.labels[rows.train], count, rng)]
-        batches = [[rows.samples[i] for i in draws[s : s + size]] for s in range(0, count, size)]
-        turns = [
-            rng.uniform(0, 2 * np.pi, len(b)) if self.recipe.augment else None for b in batches
-        ]
-        precise_batch_norm(self.net, self.spec, batches, turns, self.device)
+        drawn = list(self._batches(self.recipe.bn_batches * self.recipe.batch_size, rng))
+        batches = [[self.rows.samples[i] for i in idx] for idx, _ in drawn]
+        precise_batch_norm(self.net, self.spec, batches, [rot for _, rot in drawn], self.device)
 
 
 def _validation(
