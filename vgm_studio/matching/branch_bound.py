@@ -134,12 +134,13 @@ def _discretise(
 
 def _scores(
     w: _Window, h: int, a: NDArray[np.intp], x: NDArray[np.intp], y: NDArray[np.intp]
-) -> NDArray[np.int64]:
+) -> NDArray[np.int32]:
     """Sum of level h under the scan at each candidate (angle a, shifted x, y cells)."""
     shift: NDArray[np.signedinteger] = (x * w.stride + y).astype(w.base.dtype)
     idx = w.base[a]
     idx += shift[:, None]
-    total: NDArray[np.int64] = np.take(w.levels[h], idx).sum(axis=1, dtype=np.int64)
+    # int32 holds 255 × 8 million points, and sums a quarter faster than int64.
+    total: NDArray[np.int32] = np.take(w.levels[h], idx).sum(axis=1, dtype=np.int32)
     return total
 
 
