@@ -178,3 +178,25 @@ def test_pairwise_figures_have_no_score_key(office):
 def test_a_window_must_be_a_window(linear, angular):
     with pytest.raises(ValueError, match="search window"):
         SearchWindow(linear, angular)
+
+
+def test_the_likelihood_grid_equals_a_transform_over_the_whole_grid():
+    """The distance transform runs on the points' box only: every cell must still read what a
+    transform over the whole grid gives, points on the grid's edge included."""
+    import cv2
+
+    from vgm_studio.matching.submap import _likelihood
+
+    rng = np.random.default_rng(5)
+    for trial in range(60):
+        shape = (int(rng.integers(8, 300)), int(rng.integers(8, 300)))
+        n = int(rng.integers(1, 300))
+        cells = np.stack([rng.integers(0, shape[0], n), rng.integers(0, shape[1], n)], axis=1)
+        if trial % 2:  # a cluster in the middle, as a submap's points sit
+            cells = cells // 9 + np.array(shape) // 3
+        sigma = float(rng.choice([0.7, 1.0, 2.0]))
+        free = np.full(shape, 255, dtype=np.uint8)
+        free[cells[:, 0], cells[:, 1]] = 0
+        dist = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_5)
+        full = np.where(dist > 3.0 * sigma, 0.0, PEAK * np.exp(-0.5 * (dist / sigma) ** 2))
+        assert np.array_equal(_likelihood(cells, shape, sigma), np.rint(full).astype(np.uint8))
