@@ -139,6 +139,35 @@ def test_a_match_that_slid_out_of_its_window_goes_out_where_the_odometry_explain
     assert all(e.kept for e in edges)
 
 
+class _CountingMatcher(LoopMatcher):
+    calls = 0
+
+    def match(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        type(self).calls += 1
+        return super().match(*args, **kwargs)
+
+
+def test_a_match_turned_out_of_its_window_is_not_taken_for_a_slide(office):
+    """A match outside the window in heading only is one whose odometry turned wrong (a
+    refinement slides along walls, not round them): it is not searched across two steps,
+    which in a corridor can side with the odometry, and stays; one slid 0.6 m is searched."""
+    log = open_log(office)
+    truth_all = np.array([s.reference for s in log.scans])
+    keyframes = select_keyframes(truth_all, 0.5, 20.0)[:30]
+    scans = [log.scans[i] for i in keyframes]
+    truth = truth_all[keyframes]
+    counting = _CountingMatcher(CorrelativeConfig(min_score=0.3))
+    matcher = SequentialMatcher(scans, truth, ScanMatcher(), counting, FrontEndConfig())
+    for offset, searched in (([0.0, 0.0, math.radians(14.0)], False), ([0.6, 0.0, 0.0], True)):
+        edges = matcher.match(range(1, 20), truth)
+        e = edges[8]
+        e.guess = se2.compose(se2.between(truth[e.a], truth[e.b]), np.array(offset))
+        before = _CountingMatcher.calls
+        matcher.check_slides(edges)
+        assert (_CountingMatcher.calls > before) == searched
+        assert all(x.kept for x in edges)
+
+
 def test_wheel_less_odometry_over_sparse_scans_follows_the_robot(tmp_path):
     path = simulate(
         SimConfig(preset="repetitive", seed=5, num_beams=181, scan_spacing=1.0, laps=0.5),
