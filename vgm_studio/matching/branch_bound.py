@@ -172,7 +172,7 @@ def _leaf_score(w: _Window, leaf: tuple[int, int, int]) -> int:
 
 
 def _first_best(
-    a: NDArray[np.intp], x: NDArray[np.intp], y: NDArray[np.intp], s: NDArray[np.int64]
+    a: NDArray[np.intp], x: NDArray[np.intp], y: NDArray[np.intp], s: NDArray[np.signedinteger]
 ) -> int:
     """Index of the highest score, ties to the lowest (angle, x, y), as brute force picks."""
     top = np.flatnonzero(s == s.max())
