@@ -139,6 +139,35 @@ def test_a_match_that_slid_out_of_its_window_goes_out_where_the_odometry_explain
     assert all(e.kept for e in edges)
 
 
+def test_a_slid_match_between_two_rejected_steps_is_checked_against_their_odometry(office):
+    """Both neighbours of a slid match rejected by the validator (the graph joins them by
+    their odometry): the match across two steps takes the neighbour's odometry step, and
+    still tells a slid match (out) from a wrong odometry step (the match stays)."""
+    log = open_log(office)
+    truth_all = np.array([s.reference for s in log.scans])
+    keyframes = select_keyframes(truth_all, 0.5, 20.0)[:30]
+    scans = [log.scans[i] for i in keyframes]
+    truth = truth_all[keyframes]
+    matcher = SequentialMatcher(
+        scans, truth, ScanMatcher(), LoopMatcher(CorrelativeConfig(min_score=0.3)), FrontEndConfig()
+    )
+    along = np.array([0.0, 0.6, 0.0])
+    for slid in (True, False):
+        edges = matcher.match(range(1, 20), truth)
+        for n in (7, 9):
+            edges[n].kept = False
+        e = edges[8]
+        step = se2.between(truth[e.a], truth[e.b])
+        if slid:
+            e.match = dataclasses.replace(e.match, estimate=se2.compose(step, along))
+        else:
+            e.guess = se2.compose(step, along)
+        matcher.check_slides(edges)
+        assert edges[8].kept != slid
+        assert edges[8].consistency == ("rejected" if slid else "not-checked")
+        assert sum(x.kept for x in edges) == len(edges) - 2 - slid
+
+
 class _CountingMatcher(LoopMatcher):
     calls = 0
 

@@ -73,7 +73,7 @@ class FrontEndConfig:
             across it and its neighbour, and goes out where that match agrees with the
             odometry instead (``SequentialMatcher.check_slides``). Only with
             ``sequential_submap``. It mends the slides it is meant for (freiburg-campus
-            0.106 → 0.101 m, Belgioioso 0.060 → 0.052 m). When it also checked matches
+            0.106 → 0.092 m, Belgioioso 0.060 → 0.052 m). When it also checked matches
             turned out of the window, it took right matches out for odometry steps 9–14°
             off along the infinite corridor (0.059 → 0.32 m); translation alone, 0.059.
         sequential_wide_angular_deg: Half-width in heading of that wide window, degrees (in
