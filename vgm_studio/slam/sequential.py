@@ -93,9 +93,10 @@ class SequentialMatcher:
         word stays in ``validated``).
 
         The neighbour is a kept match inside its window where there is one, else one the
-        validator rejected, which the graph joins by its odometry step: a slid match between
-        two rejected steps has no other referee (freiburg-campus keyframe 177: the pairwise
-        matcher's answer 1.25 m off at p 0.35, with the wheels 0.18 m off; 0.101 → 0.092 m).
+        validator rejected, which the graph joins by its odometry step; without that, a slid
+        match between two rejected steps had no referee (freiburg-campus keyframe 177: the
+        pairwise matcher's answer 1.25 m off at p 0.35, with the wheels 0.18 m off; 0.101 →
+        0.092 m).
 
         The correlative search covers the small window around the odometry's step; a match
         outside it was carried there by the refinement, or found by the pairwise matcher
