@@ -115,14 +115,11 @@ class SequentialMatcher:
             j = next(inside, next((n for n in near if not edges[n].kept), None))
             if j is None:
                 continue
-            first, second = sorted((i, j))
-            a, c = edges[first].a, edges[second].b
+            a, c = edges[min(i, j)].a, edges[max(i, j)].b
             # The neighbour's step as the graph will hold it.
             theirs = edges[j].estimate if edges[j].kept else edges[j].guess
-            matched, odometry = (
-                se2.compose(mine, theirs) if i < j else se2.compose(theirs, mine)
-                for mine in (e.estimate, e.guess)
-            )
+            matched = _two_steps(i, j, e.estimate, theirs)
+            odometry = _two_steps(i, j, e.guess, theirs)
             # The block's submaps still hold as matched: each placed by the matches before it.
             across = self._across(self._submaps[a + 1], a, c, (matched, odometry))
             if across is not None and _gap(across, odometry) < _gap(across, matched):
@@ -187,11 +184,9 @@ class SequentialMatcher:
         for j in (i - 1, i + 1):
             if not 0 <= j < len(edges) or edges[j].kept or j in kept:
                 continue
-            first, second = sorted((i, j))
-            a, c = edges[first].a, edges[second].b
+            a, c = edges[min(i, j)].a, edges[max(i, j)].b
             odometry = se2.between(self.odometry[a], self.odometry[c])
-            steps = [kept[n].estimate if n == i else edges[n].guess for n in (first, second)]
-            with_match = se2.compose(steps[0], steps[1])
+            with_match = _two_steps(i, j, kept[i].estimate, edges[j].guess)
             across = self._across(self._submap(a + 1, poses), a, c, (with_match, odometry))
             if across is None or _gap(across, with_match) >= _gap(across, odometry):
                 return False
@@ -257,6 +252,14 @@ def _offset(edge: SlamEdge) -> tuple[float, float]:
     larger of x and y, metres, and the turn, radians."""
     d = edge.estimate - edge.guess
     return float(max(abs(d[0]), abs(d[1]))), abs(float(se2.wrap_angle(d[2])))
+
+
+def _two_steps(
+    i: int, j: int, mine: NDArray[np.float64], theirs: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """The relative pose across the neighbouring steps i and j, with step i taken as
+    ``mine`` and step j as ``theirs``, composed in keyframe order."""
+    return se2.compose(mine, theirs) if i < j else se2.compose(theirs, mine)
 
 
 def _gap(p: NDArray[np.float64], q: NDArray[np.float64]) -> float:
