@@ -41,6 +41,14 @@ def office(tmp_path_factory) -> Path:
     return simulate(SimConfig(preset="office", seed=4, num_beams=181, laps=0.4), folder)
 
 
+def _first_keyframes(path: Path, count: int):
+    """The first ``count`` keyframes' scans of a simulated log and their true poses."""
+    log = open_log(path)
+    truth = np.array([s.reference for s in log.scans])
+    keyframes = select_keyframes(truth, 0.5, 20.0)[:count]
+    return [log.scans[i] for i in keyframes], truth[keyframes]
+
+
 def _sequential(scans, truth, odometry, config):
     """(metres, radians) off the true step, and kept, of every sequential edge."""
     front = FrontEnd(
@@ -60,11 +68,7 @@ def _sequential(scans, truth, odometry, config):
 
 
 def test_sequential_edges_are_found_where_the_odometry_jumps(office):
-    log = open_log(office)
-    truth_all = np.array([s.reference for s in log.scans])
-    keyframes = select_keyframes(truth_all, 0.5, 20.0)[:60]
-    scans = [log.scans[i] for i in keyframes]
-    truth = truth_all[keyframes]
+    scans, truth = _first_keyframes(office, 60)
     steps = se2.between(truth[:-1], truth[1:])
     jumped = np.arange(len(steps)) % JUMP == JUMP - 1
     steps[jumped] = se2.compose(steps[jumped], OFFSET)
@@ -90,11 +94,7 @@ def test_a_keyframe_whose_odometry_alone_is_off_is_matched_on_both_sides(office)
     turn): both steps it joins are off, in opposite directions. The step after it must be
     searched against a submap that places that keyframe by its new match, not by the wrong
     first one, and both wide matches must go in together."""
-    log = open_log(office)
-    truth_all = np.array([s.reference for s in log.scans])
-    keyframes = select_keyframes(truth_all, 0.5, 20.0)[:60]
-    scans = [log.scans[i] for i in keyframes]
-    truth = truth_all[keyframes]
+    scans, truth = _first_keyframes(office, 60)
     odometry = truth.copy()
     glitched = np.arange(len(truth)) % 9 == 4
     odometry[glitched] = se2.compose(truth[glitched], np.array([0.8, 0.0, math.radians(40.0)]))
@@ -108,11 +108,7 @@ def test_a_keyframe_whose_odometry_alone_is_off_is_matched_on_both_sides(office)
 def test_a_match_that_slid_out_of_its_window_goes_out_where_the_odometry_explains_it(office):
     """A kept match 0.6 m along from a right odometry step is taken out, and a right match
     0.6 m from a wrong odometry step stays: a match across two steps says which."""
-    log = open_log(office)
-    truth_all = np.array([s.reference for s in log.scans])
-    keyframes = select_keyframes(truth_all, 0.5, 20.0)[:30]
-    scans = [log.scans[i] for i in keyframes]
-    truth = truth_all[keyframes]
+    scans, truth = _first_keyframes(office, 30)
     config = FrontEndConfig()
     matcher = SequentialMatcher(
         scans, truth, ScanMatcher(), LoopMatcher(CorrelativeConfig(min_score=0.3)), config
@@ -143,11 +139,7 @@ def test_a_slid_match_between_two_rejected_steps_is_checked_against_their_odomet
     """Both neighbours of a slid match rejected by the validator (the graph joins them by
     their odometry): the match across two steps takes the neighbour's odometry step, and
     still tells a slid match (out) from a wrong odometry step (the match stays)."""
-    log = open_log(office)
-    truth_all = np.array([s.reference for s in log.scans])
-    keyframes = select_keyframes(truth_all, 0.5, 20.0)[:30]
-    scans = [log.scans[i] for i in keyframes]
-    truth = truth_all[keyframes]
+    scans, truth = _first_keyframes(office, 30)
     matcher = SequentialMatcher(
         scans, truth, ScanMatcher(), LoopMatcher(CorrelativeConfig(min_score=0.3)), FrontEndConfig()
     )
@@ -180,11 +172,7 @@ def test_a_match_turned_out_of_its_window_is_not_taken_for_a_slide(office):
     """A match outside the window in heading only is one whose odometry turned wrong (a
     refinement slides along walls, not round them): it is not searched across two steps,
     which in a corridor can side with the odometry, and stays; one slid 0.6 m is searched."""
-    log = open_log(office)
-    truth_all = np.array([s.reference for s in log.scans])
-    keyframes = select_keyframes(truth_all, 0.5, 20.0)[:30]
-    scans = [log.scans[i] for i in keyframes]
-    truth = truth_all[keyframes]
+    scans, truth = _first_keyframes(office, 30)
     counting = _CountingMatcher(CorrelativeConfig(min_score=0.3))
     matcher = SequentialMatcher(scans, truth, ScanMatcher(), counting, FrontEndConfig())
     for offset, searched in (([0.0, 0.0, math.radians(14.0)], False), ([0.6, 0.0, 0.0], True)):
