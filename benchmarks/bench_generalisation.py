@@ -34,7 +34,7 @@ PRECISION = 0.99
 # Epochs and draws per epoch of each fold model unless --epochs/--epoch-size say otherwise:
 # the recipes of the Intel table (bench_models.py on a CPU), so a fold's models are trained
 # as the bundled ones were.
-RECIPES = {"vgmnet": (12, 6000), "rgb-baseline": (6, 3000), "score": (12, 6000)}
+RECIPES = {"vgmnet": (30, 6000), "rgb-baseline": (6, 3000), "score": (30, 6000)}
 
 
 def _candidates(log: Path, out: Path, *args: str) -> Path:

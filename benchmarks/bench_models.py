@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from _common import REPO, machine, pin_to_cores, table
@@ -62,13 +63,9 @@ def main() -> None:
             # On a CPU the RGB baseline gets fewer, smaller epochs; the table's last
             # columns say what each was trained on.
             slow = not gpu and model == "rgb-baseline"
-            config = TrainConfig(
-                model=model,
-                hyper=hyper,
-                device=args.device,
-                epochs=6 if slow else 12,
-                epoch_size=3000 if slow else 6000,
-            )
+            config = TrainConfig(model=model, hyper=hyper, device=args.device)
+            if slow:
+                config = replace(config, epochs=6, epoch_size=3000)
             train(data, config, path, progress=False, log=print)
         v = Validator.load(path, device="cpu")
         probs = v.predict_samples(test.samples)

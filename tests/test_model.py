@@ -322,3 +322,19 @@ def test_batched_cells_path_equals_dense_network(tmp_path, occupancy):
     got = Validator.load(path, device="cpu").predict_samples(samples, batch_size=256)
     np.testing.assert_allclose(got, want, atol=1e-5)
     assert np.ptp(got) > 1e-3  # the pairs do differ, so the comparison says something
+
+
+def test_train_command_defaults_are_the_train_config_defaults():
+    """The command line spells its defaults (it must not load torch to start), so they are
+    checked against the config the benchmarks and ``train_default.py`` rely on."""
+    import inspect
+
+    from vgm_studio.model.training import TrainConfig
+    from vgm_studio.tools.model_cmds import train as train_command
+
+    defaults = TrainConfig()
+    params = inspect.signature(train_command).parameters
+    shared = ["epochs", "batch_size", "lr", "patience", "val_fraction", "epoch_size"]
+    shared += ["max_train", "augment", "seed", "bn_batches", "threads"]
+    for name in shared:
+        assert params[name].default == getattr(defaults, name), name

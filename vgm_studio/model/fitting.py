@@ -48,12 +48,12 @@ class Recipe:
             many batches of training draws (``precise_bn``); 0 keeps the running averages.
     """
 
-    epochs: int = 12
+    epochs: int = 30
     epoch_size: int | None = 6000
     batch_size: int = 64
     lr: float = 2e-3
     weight_decay: float = 1e-4
-    patience: int = 4
+    patience: int = 8
     augment: bool = True
     seed: int = 0
     bn_batches: int = 0

@@ -69,11 +69,11 @@ class TrainConfig:
     """
 
     model: str = "vgmnet"
-    epochs: int = 12
+    epochs: int = 30
     batch_size: int = 64
     lr: float = 2e-3
     weight_decay: float = 1e-4
-    patience: int = 4
+    patience: int = 8
     val_fraction: float = 0.15
     epoch_size: int | None = 6000
     max_train: int | None = None

@@ -19,10 +19,10 @@ def train(
     edges: EdgesArg,
     out: Annotated[Path, typer.Option(help="Checkpoint to write (.pt).")],
     model: Annotated[str, one_of(MODEL_NAMES, "Which model.")] = "vgmnet",
-    epochs: Annotated[int, typer.Option(min=1, help="Epochs at most.")] = 12,
+    epochs: Annotated[int, typer.Option(min=1, help="Epochs at most.")] = 30,
     batch_size: Annotated[int, typer.Option(min=1, help="Pairs per step.")] = 64,
     lr: Annotated[float, typer.Option(min=0.0, help="Adam learning rate.")] = 2e-3,
-    patience: Annotated[int, typer.Option(min=1, help="Early-stopping patience.")] = 4,
+    patience: Annotated[int, typer.Option(min=1, help="Early-stopping patience.")] = 8,
     val_fraction: Annotated[
         float, typer.Option(min=0.0, max=0.9, help="Held out per (log, label).")
     ] = 0.15,
