@@ -10,6 +10,10 @@ from collections.abc import Callable
 from datetime import date
 from pathlib import Path
 
+# On a CPU the RGB baseline (2 ms a pair) trains fewer, smaller epochs than TrainConfig's
+# defaults: (epochs, draws per epoch). Its tables' last columns say so.
+RGB_CPU_RECIPE = (6, 3000)
+
 REPO = Path(__file__).resolve().parents[1]
 
 

@@ -24,17 +24,25 @@ import sys
 import time
 from pathlib import Path
 
-from _common import datasets_dir, machine, pin_to_cores, table
+from _common import RGB_CPU_RECIPE, datasets_dir, machine, pin_to_cores, table
 from edge_sets import BUILD, training_edges
 from folds import Building, make_folds
 from recalibrate import recalibrate
 
 MODELS = ("vgmnet", "rgb-baseline", "score")
 PRECISION = 0.99
-# Epochs and draws per epoch of each fold model unless --epochs/--epoch-size say otherwise:
+# Epochs and draws per epoch of a fold model unless --epochs/--epoch-size say otherwise:
 # the recipes of the Intel table (bench_models.py on a CPU), so a fold's models are trained
-# as the bundled ones were.
-RECIPES = {"vgmnet": (30, 6000), "rgb-baseline": (6, 3000), "score": (30, 6000)}
+# as the bundled ones were: TrainConfig's defaults, but fewer, smaller epochs for the RGB
+# baseline on a CPU.
+CPU_RECIPES = {"rgb-baseline": RGB_CPU_RECIPE}
+
+
+def _recipe(model: str) -> tuple[int, int | None]:
+    from vgm_studio.model.training import TrainConfig
+
+    defaults = TrainConfig()
+    return CPU_RECIPES.get(model, (defaults.epochs, defaults.epoch_size))
 
 
 def _candidates(log: Path, out: Path, *args: str) -> Path:
@@ -125,7 +133,7 @@ def _fold_rows(fold, data, origin: list[str], models: list[str], args) -> list[l
     rows = []
     for model in models:
         out = BUILD / "folds" / f"{fold.held_out}-{model}.pt"
-        epochs, epoch_size = RECIPES[model]
+        epochs, epoch_size = _recipe(model)
         config = TrainConfig(
             model=model,
             epochs=args.epochs or epochs,
@@ -188,7 +196,7 @@ def main() -> None:
     print(
         "\n# leave-one-building-out, loops of each held-out building; epochs × draws per fold "
         + ", ".join(
-            f"{m} {args.epochs or RECIPES[m][0]} × {args.epoch_size or RECIPES[m][1]}"
+            f"{m} {args.epochs or _recipe(m)[0]} × {args.epoch_size or _recipe(m)[1]}"
             for m in models
             if m != "score"
         )

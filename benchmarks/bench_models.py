@@ -17,7 +17,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from _common import REPO, machine, pin_to_cores, table
+from _common import REPO, RGB_CPU_RECIPE, machine, pin_to_cores, table
 from edge_sets import test_edges, training_edges
 
 MODELS = REPO / "build" / "models"
@@ -60,12 +60,10 @@ def main() -> None:
         if name not in SHIPPED and (args.retrain or not path.exists()):
             data = data or read_labelled(training_edges(), progress=False)
             gpu = args.device == "cuda" or (args.device == "auto" and torch.cuda.is_available())
-            # On a CPU the RGB baseline gets fewer, smaller epochs; the table's last
-            # columns say what each was trained on.
-            slow = not gpu and model == "rgb-baseline"
             config = TrainConfig(model=model, hyper=hyper, device=args.device)
-            if slow:
-                config = replace(config, epochs=6, epoch_size=3000)
+            if not gpu and model == "rgb-baseline":
+                epochs, epoch_size = RGB_CPU_RECIPE
+                config = replace(config, epochs=epochs, epoch_size=epoch_size)
             train(data, config, path, progress=False, log=print)
         v = Validator.load(path, device="cpu")
         probs = v.predict_samples(test.samples)
