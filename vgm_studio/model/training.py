@@ -68,18 +68,19 @@ class TrainConfig:
         hyper: Network hyper-parameters overriding the model's defaults.
     """
 
+    # The training loop's fields default to the loop's own recipe (``fitting.Recipe``).
     model: str = "vgmnet"
-    epochs: int = 30
-    batch_size: int = 64
-    lr: float = 2e-3
-    weight_decay: float = 1e-4
-    patience: int = 8
+    epochs: int = Recipe.epochs
+    batch_size: int = Recipe.batch_size
+    lr: float = Recipe.lr
+    weight_decay: float = Recipe.weight_decay
+    patience: int = Recipe.patience
     val_fraction: float = 0.15
-    epoch_size: int | None = 6000
+    epoch_size: int | None = Recipe.epoch_size
     max_train: int | None = None
-    augment: bool = True
-    seed: int = 0
-    bn_batches: int = 0
+    augment: bool = Recipe.augment
+    seed: int = Recipe.seed
+    bn_batches: int = Recipe.bn_batches
     device: str = "auto"
     threads: int | None = None
     init: str | None = None
