@@ -184,13 +184,15 @@ class VGMNet(nn.Module):
         value: torch.Tensor,
         extra: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """``forward`` on a folded, lifted batch given by its occupied cells alone (eval mode).
+        """``forward`` on a folded, lifted batch given by its occupied cells alone.
 
         The stem is a 1×1 convolution and a batch norm, so at an empty folded position its
         output is one constant vector; about 97% of the positions are empty. So the stem is
         computed at the occupied positions only, and the first strided block as the
         convolution of that constant field (one small image) plus each occupied position's
-        difference from it: the two dense passes that cost most on a CPU are never made.
+        difference from it: the two dense passes that cost most on a CPU (forward and, in
+        training, backward) are never made. In training the stem's batch statistics are
+        those of the whole dense batch, the empty positions counted in closed form.
 
         Args:
             batch: Pairs in the batch.
@@ -200,27 +202,66 @@ class VGMNet(nn.Module):
             value: Each occupied cell's (lifted) value.
             extra: The matcher's figures, when built with ``figures``.
         """
-        if self.training:
-            raise RuntimeError("forward_cells reads batch norm's running statistics: eval() first")
-        weight, shift = self._stem_affine()
         rows, at = torch.unique(index, return_inverse=True)
+        if self.training:
+            occupied, empty = self._stem_training(
+                batch * side * side, len(rows), at, channel, value
+            )
+        else:
+            occupied, empty = self._stem_eval(len(rows), at, channel, value)
+        first = self.features[3]
+        assert isinstance(first, nn.Sequential)
+        x = _sparse_block(first, batch, side, rows, occupied - empty, empty)
+        out: torch.Tensor = self.head(self.features[4:](x), extra)
+        return out
+
+    def _stem_eval(
+        self, rows: int, at: torch.Tensor, channel: torch.Tensor, value: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The stem's output at the occupied positions and at an empty one, batch norm's
+        running statistics folded into one affine map."""
+        weight, shift = self._stem_affine()
         if weight.device.type == "cpu":
             # The occupied cells as a sparse (positions × channels) matrix times the stem's
             # weights: scipy's CSR product is ~7× faster on two cores than torch's index_add_.
             cells = csr_matrix(
                 (value.detach().numpy(), (at.numpy(), channel.numpy())),
-                shape=(len(rows), weight.shape[0]),
+                shape=(rows, weight.shape[0]),
             )
             pre = torch.from_numpy(np.asarray(cells @ weight.detach().numpy())) + shift
         else:
-            pre = shift.expand(len(rows), -1).clone()
+            pre = shift.expand(rows, -1).clone()
             pre.index_add_(0, at, value[:, None] * weight[channel])
-        empty = torch.relu(shift)
-        first = self.features[3]
-        assert isinstance(first, nn.Sequential)
-        x = _sparse_block(first, batch, side, rows, torch.relu(pre) - empty, empty)
-        out: torch.Tensor = self.head(self.features[4:](x), extra)
-        return out
+        return torch.relu(pre), torch.relu(shift)
+
+    def _stem_training(
+        self,
+        positions: int,
+        rows: int,
+        at: torch.Tensor,
+        channel: torch.Tensor,
+        value: torch.Tensor,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """As ``_stem_eval``, normalised by the batch's statistics over all ``positions``
+        (empty ones included, where the convolution's output is its bias), which also move
+        batch norm's running averages as ``nn.BatchNorm2d`` would."""
+        conv, norm = self.features[0], self.features[1]
+        assert isinstance(conv, nn.Conv2d) and isinstance(norm, nn.BatchNorm2d)
+        cells = conv.weight.new_zeros(rows, conv.in_channels)
+        cells.index_put_((at, channel), value.to(cells.dtype), accumulate=True)
+        bias = conv.bias if conv.bias is not None else conv.weight.new_zeros(conv.out_channels)
+        pre = cells @ conv.weight[:, :, 0, 0].T + bias
+        # Sums in float64: E[x²] − E[x]² over ~10⁵ positions loses float32's digits.
+        blank = positions - rows
+        pre64, bias64 = pre.double(), bias.double()
+        mean = (pre64.sum(0) + blank * bias64) / positions
+        var = (pre64.pow(2).sum(0) + blank * bias64.pow(2)) / positions - mean.pow(2)
+        var = var.clamp(min=0.0)
+        _update_running_stats(norm, mean.detach(), var.detach(), positions)
+        scale = norm.weight / torch.sqrt(var.float() + norm.eps)
+        occupied = (pre - mean.float()) * scale + norm.bias
+        empty = (bias - mean.float()) * scale + norm.bias
+        return torch.relu(occupied), torch.relu(empty)
 
     def _stem_affine(self) -> tuple[torch.Tensor, torch.Tensor]:
         """The stem's 1×1 convolution and batch norm as (C_in, C_out) weights and a shift."""
@@ -263,17 +304,44 @@ def _sparse_block(
     out = base.permute(0, 2, 3, 1).repeat(batch, 1, 1, 1).view(-1, channels)  # one copy
     pair, position = rows // (side * side), rows % (side * side)
     i, j = position // side, position % side
+    targets, terms = [], []
     for ki in range(kh):
         ti = i + ph - ki  # stride × output row, when the tap lands on one
         for kj in range(kw):
             tj = j + pw - kj
             ok = (ti % sh == 0) & (ti >= 0) & (ti < sh * oh) & (tj % sw == 0) & (tj >= 0)
             ok &= tj < sw * ow
-            target = (pair[ok] * oh + ti[ok] // sh) * ow + tj[ok] // sw
-            out.index_add_(0, target, delta[ok] @ conv.weight[:, :, ki, kj].T)
+            targets.append((pair[ok] * oh + ti[ok] // sh) * ow + tj[ok] // sw)
+            terms.append(delta[ok] @ conv.weight[:, :, ki, kj].T)
+    target, term = torch.cat(targets), torch.cat(terms)
+    if torch.is_grad_enabled() and term.requires_grad:
+        # In training an in-place add would have autograd keep a copy of the whole field.
+        out = out.index_add(0, target, term)
+    else:
+        out.index_add_(0, target, term)
     x = out.view(batch, oh, ow, channels).permute(0, 3, 1, 2)
     result: torch.Tensor = block[2](block[1](x))
     return result
+
+
+def _update_running_stats(
+    norm: nn.BatchNorm2d, mean: torch.Tensor, var: torch.Tensor, count: int
+) -> None:
+    """Moves ``norm``'s running averages by a batch's mean and biased variance over ``count``
+    values, as ``nn.BatchNorm2d`` does in training (the running variance is unbiased;
+    momentum None is a cumulative average)."""
+    if not norm.track_running_stats:
+        return
+    assert norm.running_mean is not None and norm.running_var is not None
+    assert norm.num_batches_tracked is not None
+    with torch.no_grad():
+        norm.num_batches_tracked.add_(1)
+        factor = norm.momentum
+        if factor is None:
+            factor = 1.0 / float(norm.num_batches_tracked)
+        unbiased = var * count / max(count - 1, 1)
+        norm.running_mean.mul_(1 - factor).add_(factor * mean.to(norm.running_mean.dtype))
+        norm.running_var.mul_(1 - factor).add_(factor * unbiased.to(norm.running_var.dtype))
 
 
 def fuse_batch_norm(net: nn.Module) -> nn.Module:

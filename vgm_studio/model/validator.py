@@ -125,11 +125,10 @@ def network_logits(
     """The network's logits for a batch, in the mode it is in (training or eval).
 
     Networks that take the batch's occupied cells (``forward_cells``) are fed those instead of
-    dense VGMs: the paper's network always (the same function, at a fraction of the cost);
-    the folded VGMNet at inference, where its stem folds into one affine map.
+    dense VGMs, in training as at inference: the same function at a fraction of the cost.
     """
-    folded_eval = isinstance(net, VGMNet) and spec.fold > 1 and not net.training
-    if spec.kind == "vgm" and (isinstance(net, VGMNetPaper) or folded_eval):
+    folded = isinstance(net, VGMNet) and spec.fold > 1
+    if spec.kind == "vgm" and (isinstance(net, VGMNetPaper) or folded):
         return _cells_logits(net, spec, samples, device, rotations)
     x, extra = spec.tensors(samples, device, rotations)
     return forward(net, x, extra)
