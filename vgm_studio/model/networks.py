@@ -109,9 +109,7 @@ class VGMNetPaper(nn.Module):
         assert isinstance(conv, nn.Conv2d) and conv.bias is not None
         assert isinstance(first, nn.Sequential)
         rows, at = torch.unique(index, return_inverse=True)
-        cells = conv.weight.new_zeros(len(rows), conv.in_channels)
-        cells[at, channel] = value.to(cells.dtype)
-        pre = cells @ conv.weight[:, :, 0, 0].T + conv.bias
+        pre = _pointwise_at_cells(conv, len(rows), at, channel, value)
         empty = torch.relu(conv.bias)
         x = _sparse_block(first, batch, side, rows, torch.relu(pre) - empty, empty)
         logit: torch.Tensor = self.head(self.features[3:](x))
@@ -247,10 +245,8 @@ class VGMNet(nn.Module):
         batch norm's running averages as ``nn.BatchNorm2d`` would."""
         conv, norm = self.features[0], self.features[1]
         assert isinstance(conv, nn.Conv2d) and isinstance(norm, nn.BatchNorm2d)
-        cells = conv.weight.new_zeros(rows, conv.in_channels)
-        cells.index_put_((at, channel), value.to(cells.dtype), accumulate=True)
+        pre = _pointwise_at_cells(conv, rows, at, channel, value)
         bias = conv.bias if conv.bias is not None else conv.weight.new_zeros(conv.out_channels)
-        pre = cells @ conv.weight[:, :, 0, 0].T + bias
         # Sums in float64: E[x²] − E[x]² over ~10⁵ positions loses float32's digits.
         blank = positions - rows
         pre64, bias64 = pre.double(), bias.double()
@@ -275,6 +271,17 @@ class VGMNet(nn.Module):
             weight = weight * scale
             shift = (shift - norm.running_mean) * scale + norm.bias
         return weight, shift
+
+
+def _pointwise_at_cells(
+    conv: nn.Conv2d, rows: int, at: torch.Tensor, channel: torch.Tensor, value: torch.Tensor
+) -> torch.Tensor:
+    """A 1×1 convolution's output (bias included) at ``rows`` occupied positions, from their
+    cells: cell k is at position ``at[k]``, in input channel ``channel[k]``. Differentiable."""
+    cells = conv.weight.new_zeros(rows, conv.in_channels)
+    cells.index_put_((at, channel), value.to(cells.dtype), accumulate=True)
+    out = cells @ conv.weight[:, :, 0, 0].T
+    return out + conv.bias if conv.bias is not None else out
 
 
 def _sparse_block(
