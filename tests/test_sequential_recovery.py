@@ -202,3 +202,58 @@ def test_wheel_less_odometry_over_sparse_scans_follows_the_robot(tmp_path):
     assert len(scans) > 40
     assert wrong_steps(Recovery()) < 0.05
     assert wrong_steps(Recovery(gain=math.inf)) > 0.5
+
+
+class _AliasingMatcher(LoopMatcher):
+    """Over the wide window, puts keyframe ``alias_of`` turned by ``turn`` from its true
+    step, with every point an inlier: a search that found a convincing wrong pose (fhw
+    keyframes 55–56, a robot turning on the spot)."""
+
+    def __init__(self, scans, truth, alias_of: int, turn: float) -> None:
+        super().__init__(CorrelativeConfig(min_score=0.3))
+        self.scans, self.truth, self.alias_of, self.turn = scans, truth, alias_of, turn
+
+    def match(self, submap, target, scan, guess, window, min_score=None):  # type: ignore[no-untyped-def]
+        found = super().match(submap, target, scan, guess, window, min_score)
+        k = self.alias_of
+        if scan is self.scans[k] and target is self.scans[k - 1] and window.angular > 1.0:
+            step = se2.between(self.truth[k - 1], self.truth[k])
+            wrong = se2.compose(step, np.array([0.0, 0.0, self.turn]))
+            return dataclasses.replace(found, estimate=wrong, inlier_ratio=1.0, score=1.0)
+        return found
+
+
+@pytest.mark.parametrize("odometry_wrong", [False, True])
+def test_a_wide_match_that_turns_a_matched_chain_needs_a_match_across_two_steps(
+    office, odometry_wrong
+):
+    """A rejected step between two matched ones, searched again over the wide window, where
+    the search finds a pose 60° off the odometry and the validator passes it: it goes in
+    only where a match across two steps agrees with it rather than with the odometry. A
+    wrong turn (the odometry right) stays out; a right one (the odometry 60° off) goes in."""
+    scans, truth = _first_keyframes(office, 30)
+    turn = math.radians(60.0)
+    k = 9  # edges[8] joins keyframes 8 and 9
+    odometry = truth.copy()
+    if odometry_wrong:  # step 8 alone is 60° off
+        odometry[k] = se2.compose(truth[k], np.array([0.0, 0.0, -turn]))
+        odometry[k + 1 :] = se2.compose(odometry[k], se2.between(truth[k], truth[k + 1 :]))
+    aliasing = _AliasingMatcher(scans, truth, k, 0.0 if odometry_wrong else turn)
+    matcher = SequentialMatcher(scans, odometry, ScanMatcher(), aliasing, FrontEndConfig())
+    edges = matcher.match(range(1, 20), truth)
+    # The validator rejected the first match, which put little of the scan on the submap.
+    edges[8].kept = False
+    edges[8].match = dataclasses.replace(edges[8].match, inlier_ratio=0.5)
+
+    def keep_all(batch: list[SlamEdge]) -> None:
+        for e in batch:
+            e.kept = True
+
+    matcher.retry(edges, keep_all)
+    step = se2.between(truth[8], truth[9])
+    replaced = edges[8].kept
+    assert replaced == odometry_wrong
+    if replaced:
+        err = se2.between(step, edges[8].estimate)
+        assert abs(err[2]) < math.radians(1.0) and math.hypot(err[0], err[1]) < 0.05
+    assert all(e.kept for i, e in enumerate(edges) if i != 8)
