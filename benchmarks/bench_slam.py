@@ -13,7 +13,12 @@ vgmnet validator and ``--robust none``:
 - simulated ``office``, ``repetitive`` and ``corridor`` worlds, seeds 1–4, with 10 injected
   false loop closures each, scored against the simulator's TRUEPOS.
 
-Run: python benchmarks/bench_slam.py [--logs intel,office-1,...] [--list]
+Run: python benchmarks/bench_slam.py [--logs intel,office-1,...] [--nudge 1,2] [--list]
+
+``--nudge SEEDS`` runs each row again per seed with its odometry nudged by noise of σ 1e-9
+(``nudged_slam.py``, the size of another machine's rounding) and adds the range of the
+``after`` error over those runs: a row whose figure moves far turns on a decision that
+rounding flips, and may not hold on another machine.
 
 Wall seconds depend on what else the machine runs; CPU seconds (the child's user + system
 time) much less so.
@@ -27,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import resource
 import subprocess
 import sys
@@ -71,7 +77,7 @@ def _simulated(name: str) -> Path:
     return log
 
 
-def arguments(name: str) -> list[str | Path]:
+def arguments(name: str, json_path: Path, pictures: bool = True) -> list[str | Path]:
     data = datasets_dir()
     if name == "intel":
         args: list[str | Path] = [
@@ -83,16 +89,27 @@ def arguments(name: str) -> list[str | Path]:
         args = [data / "mit-csail" / "mit-csail.clf"]
     else:
         args = [_simulated(name), "--inject-false-loops", "10", "--seed", name.rsplit("-")[-1]]
-    if name in PICTURES:
+    if name in PICTURES and pictures:
         args += ["--map-png", OUT / f"maps-{name}", "--resolution", "0.1"]
-    return [*args, "--robust", "none", "--json", OUT / f"{name}.json"]
+    return [*args, "--robust", "none", "--json", json_path]
 
 
-def run(name: str) -> dict:
+def json_path(name: str, nudge: int | None = None) -> Path:
+    return OUT / (f"{name}.json" if nudge is None else f"{name}-nudge{nudge}.json")
+
+
+def run(name: str, nudge: int | None = None) -> dict:
+    """One row's run; with ``nudge``, its odometry nudged by rounding-level noise of that
+    seed (``nudged_slam.py``)."""
+    path = json_path(name, nudge)
+    if nudge is None:
+        command = [sys.executable, "-m", "vgm_studio.tools.cmd"]
+    else:
+        command = [sys.executable, str(Path(__file__).with_name("nudged_slam.py")), str(nudge)]
     start = time.perf_counter()
     cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
     proc = subprocess.run(
-        [sys.executable, "-m", "vgm_studio.tools.cmd", "slam", *map(str, arguments(name))],
+        [*command, "slam", *map(str, arguments(name, path, pictures=nudge is None))],
         capture_output=True,
         text=True,
     )
@@ -101,10 +118,10 @@ def run(name: str) -> dict:
     cpu_s = after.ru_utime + after.ru_stime - cpu.ru_utime - cpu.ru_stime
     if proc.returncode:
         return {"error": proc.stderr.strip().splitlines()[-1] if proc.stderr else "failed"}
-    doc = json.loads((OUT / f"{name}.json").read_text())
+    doc = json.loads(path.read_text())
     doc["wall"] = wall
     doc["cpu"] = cpu_s
-    (OUT / f"{name}.json").write_text(json.dumps(doc, indent=2) + "\n")
+    path.write_text(json.dumps(doc, indent=2) + "\n")
     return doc
 
 
@@ -117,9 +134,19 @@ def _err(d: dict | None) -> str:
     )
 
 
-def row(name: str, d: dict) -> list[str]:
+def _nudged(runs: list[dict]) -> str:
+    """The range of the ``after`` error over nudged runs."""
+    errors = [d["after"]["trans_mean"] for d in runs if "after" in d]
+    failed = len(runs) - len(errors)
+    if not errors:
+        return f"{failed} failed" if failed else ""
+    text = f"{min(errors):.3f}–{max(errors):.3f} m ({len(errors)})"
+    return text + (f", {failed} failed" if failed else "")
+
+
+def row(name: str, d: dict, nudged: list[dict] | None = None) -> list[str]:
     if "error" in d:
-        return [name, d["error"][:60], *[""] * 8]
+        return [name, d["error"][:60], *[""] * (9 if nudged is None else 10)]
     by = d["loops_by_source"]
     false = (
         f"{d['injected_false_loops_kept']}/{d['injected_false_loops']}" if by["injected"] else ""
@@ -127,6 +154,7 @@ def row(name: str, d: dict) -> list[str]:
     return [
         name,
         _err(d.get("after")),
+        *([] if nudged is None else [_nudged(nudged)]),
         _err(d.get("before")),
         str(by["window"]),
         str(by["place"]),
@@ -138,7 +166,7 @@ def row(name: str, d: dict) -> list[str]:
     ]
 
 
-def verdicts(results: dict[str, dict]) -> list[str]:
+def verdicts(results: dict[str, dict], nudged: dict[str, list[dict]] | None = None) -> list[str]:
     out = []
     intel = results.get("intel")
     if intel and "after" in intel:
@@ -155,6 +183,21 @@ def verdicts(results: dict[str, dict]) -> list[str]:
             f"corrected logs ≤ {TARGET_CORRECTED_M} m: {len(corrected) - len(missed)} of "
             f"{len(corrected)} met" + (f" (missed: {', '.join(missed)})" if missed else "")
         )
+    if nudged and corrected:
+        held = [
+            n
+            for n, d in corrected.items()
+            if nudged.get(n)
+            and all(
+                r.get("after", {}).get("trans_mean", math.inf) <= TARGET_CORRECTED_M
+                for r in nudged[n]
+            )
+            and d["after"]["trans_mean"] <= TARGET_CORRECTED_M
+        ]
+        out.append(
+            f"corrected logs ≤ {TARGET_CORRECTED_M} m in the run and every nudged run: "
+            f"{len(held)} of {len(corrected)}"
+        )
     sims = [d for n, d in results.items() if n not in CORRECTED and "injected_false_loops" in d]
     sims = [d for d in sims if d["injected_false_loops"]]
     if sims:
@@ -168,6 +211,12 @@ def main() -> None:
     parser.add_argument("--logs", help="Comma-separated rows to run (see --list); default all.")
     parser.add_argument("--list", action="store_true", help="List the row names and stop.")
     parser.add_argument(
+        "--nudge",
+        default="",
+        help="Comma-separated seeds: run each row again per seed with its odometry nudged by "
+        "noise of σ 1e-9 (nudged_slam.py) and add the range of the after error.",
+    )
+    parser.add_argument(
         "--from-json",
         action="store_true",
         help="Print the table from the rows' JSON in build/slam (runs made earlier, e.g. in "
@@ -178,28 +227,33 @@ def main() -> None:
         print("\n".join(rows_known()))
         return
     names = args.logs.split(",") if args.logs else rows_known()
+    seeds = [int(x) for x in args.nudge.split(",") if x.strip()]
     unknown = sorted(set(names) - set(rows_known()))
     if unknown:
         raise SystemExit(f"unknown rows: {', '.join(unknown)} (see --list)")
     pin_to_cores(2)
     OUT.mkdir(parents=True, exist_ok=True)
-    results, rows = {}, []
+    results, rows, nudged = {}, [], {}
     for name in names:
         if args.from_json:
-            path = OUT / f"{name}.json"
+            path = json_path(name)
             if not path.exists():
                 continue
             d = json.loads(path.read_text())
+            paths = [json_path(name, seed) for seed in seeds]
+            nudged[name] = [json.loads(p.read_text()) for p in paths if p.exists()]
         else:
             d = run(name)
+            nudged[name] = [run(name, seed) for seed in seeds]
         results[name] = d
-        rows.append(row(name, d))
+        rows.append(row(name, d, nudged[name] if seeds else None))
         print(f"{name}: {' | '.join(rows[-1][1:])}", file=sys.stderr, flush=True)
     print("# vgm-studio slam, --validator vgmnet (bundled), --robust none; whole runs on 2 cores")
     print(f"# {machine()}")
     header = [
         "log",
         "after (mean ± std)",
+        *([f"after, nudged (seeds {args.nudge})"] if seeds else []),
         "before (mean ± std)",
         "by window",
         "by place",
@@ -210,7 +264,7 @@ def main() -> None:
         "CPU s",
     ]
     print(table(header, rows))
-    for line in verdicts(results):
+    for line in verdicts(results, nudged if seeds else None):
         print(line)
 
 
