@@ -141,6 +141,9 @@ def _nudged(runs: list[dict]) -> str:
     if not errors:
         return f"{failed} failed" if failed else ""
     text = f"{min(errors):.3f}–{max(errors):.3f} m ({len(errors)})"
+    injected = sum(d.get("injected_false_loops", 0) for d in runs)
+    if injected:
+        text += f", {sum(d['injected_false_loops_kept'] for d in runs)}/{injected} false kept"
     return text + (f", {failed} failed" if failed else "")
 
 
@@ -203,6 +206,11 @@ def verdicts(results: dict[str, dict], nudged: dict[str, list[dict]] | None = No
     if sims:
         kept = sum(d["injected_false_loops_kept"] for d in sims)
         out.append(f"false loops kept over {len(sims)} simulated runs: {kept}")
+    nudged_sims = [r for n, runs in (nudged or {}).items() if n not in CORRECTED for r in runs]
+    nudged_sims = [r for r in nudged_sims if r.get("injected_false_loops")]
+    if nudged_sims:
+        kept = sum(r["injected_false_loops_kept"] for r in nudged_sims)
+        out.append(f"…and over {len(nudged_sims)} nudged simulated runs: {kept}")
     return out
 
 

@@ -191,9 +191,11 @@ class SequentialMatcher:
             checked = [j for j in (i + 1, i - 1) if 0 <= j < len(edges)][:1]
         for j in checked:
             a, c = edges[min(i, j)].a, edges[max(i, j)].b
-            theirs = kept[j].estimate if j in kept else edges[j].estimate
+            # The neighbour's step as the graph will hold it.
             if self._odometry_neighbour(j, edges, kept):
                 theirs = edges[j].guess
+            else:
+                theirs = kept[j].estimate if j in kept else edges[j].estimate
             with_match = _two_steps(i, j, kept[i].estimate, theirs)
             odometry = _two_steps(i, j, kept[i].guess, theirs)
             across = self._across(self._submap(a + 1, poses), a, c, (with_match, odometry))
