@@ -13,7 +13,11 @@ Fold models already in build/edges/folds are used again (a stopped run goes on w
 one; ``--retrain`` trains them all again).
 
 Run: python benchmarks/bench_generalisation.py [--models vgmnet,score] [--buildings orebro]
-     [--epochs 12] [--epoch-size 6000] [--max-train N] [--retrain]
+     [--epochs 12] [--epoch-size 6000] [--max-train N] [--retrain] [--second-look 4]
+
+``--second-look 4`` tests the network models with ``validator.SecondLook``: the pairs they
+are unsure of (p between 0.02 and 0.98) judged again, their logits averaged over the pair
+turned four ways.
 """
 
 from __future__ import annotations
@@ -126,7 +130,7 @@ def _fold_rows(fold, data, origin: list[str], models: list[str], args) -> list[l
     """Trains each model on the fold's training files and tests it on the held-out loops."""
     from vgm_studio.model.checkpoint import load_checkpoint
     from vgm_studio.model.training import TrainConfig, train
-    from vgm_studio.model.validator import Validator
+    from vgm_studio.model.validator import SecondLook, Validator
 
     test = subset(data, origin, [fold.test])
     training = subset(data, origin, fold.train)
@@ -149,7 +153,8 @@ def _fold_rows(fold, data, origin: list[str], models: list[str], args) -> list[l
             print(recalibrate(out, training), flush=True)  # trained before the rule
         checkpoint = load_checkpoint(out)
         start = time.perf_counter()
-        probs = Validator.load(out, device="cpu").predict_samples(test.samples)
+        look = SecondLook(turns=args.second_look) if model != "score" else None
+        probs = Validator.load(out, device="cpu", second_look=look).predict_samples(test.samples)
         # Training (as the checkpoint recorded it) and testing.
         seconds = checkpoint.training["seconds"] + time.perf_counter() - start
         rows.append(_row(fold.held_out, model, test.labels, probs, checkpoint, seconds))
@@ -167,7 +172,17 @@ def main() -> None:
     parser.add_argument(
         "--retrain", action="store_true", help="Train fold models again even if present."
     )
+    parser.add_argument(
+        "--second-look",
+        type=int,
+        default=1,
+        metavar="TURNS",
+        help="Look again at the pairs a network is unsure of, its logits averaged over the "
+        "pair turned TURNS ways (validator.SecondLook; 1: off).",
+    )
     args = parser.parse_args()
+    if args.second_look < 1:
+        raise SystemExit("--second-look: TURNS must be 1 or more")
     pin_to_cores(2)
     from vgm_studio.model.training import read_labelled
 
@@ -201,6 +216,7 @@ def main() -> None:
             if m != "score"
         )
         + (f", at most {args.max_train} training edges" if args.max_train else "")
+        + (f"; a second look over {args.second_look} turns" if args.second_look > 1 else "")
         + "; 2 CPU cores"
     )
     print(f"# {machine()}")

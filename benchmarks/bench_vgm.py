@@ -116,15 +116,23 @@ def _throughput(fn, count: int, rounds: int) -> tuple[float, float]:
 def _end_to_end_table(log, count: int, rounds: int) -> None:
     import torch
 
-    from vgm_studio.model.validator import Validator
+    from vgm_studio.model.validator import SecondLook, Validator
 
     validator = Validator.load(DEFAULT, device="cpu")
+    look = SecondLook()
+    looking = Validator.load(DEFAULT, device="cpu", second_look=look)
     samples = _samples(log, count)
+    first = validator.predict_samples(samples, batch_size=B)
+    unsure = float(np.mean((first > look.band[0]) & (first < look.band[1])))
     old = _per_pair_logits(validator, samples, B)
     diff = float(np.abs(old - validator.predict_samples(samples, batch_size=B)).max())
     paths = (
         ("per-pair VGMs, dense network (before)", lambda: _per_pair_logits(validator, samples, B)),
         ("batched VGM cells, sparse stem (now)", lambda: validator.predict_samples(samples, B)),
+        (
+            f"now, and a second look ({look.turns} turns) at the unsure",
+            lambda: looking.predict_samples(samples, B),
+        ),
     )
     rows = []
     now = 0.0
@@ -133,22 +141,26 @@ def _end_to_end_table(log, count: int, rounds: int) -> None:
     for threads in (2, 1):
         torch.set_num_threads(threads)
         base = None
-        for name, fn in paths:
+        for k, (name, fn) in enumerate(paths):
             fn()
             wall, cpu = _throughput(fn, count, rounds)
             base = base or (wall, cpu)
-            now = wall if threads == 2 else now
+            now = wall if threads == 2 and k == 1 else now
             ratios = f"{wall / base[0]:.2f}×", f"{cpu / base[1]:.2f}×"
             rows.append([name, str(threads), f"{wall:.0f}", ratios[0], f"{cpu:.0f}", ratios[1]])
     torch.set_num_threads(2)
     load = " / ".join(f"{x:.1f}" for x in os.getloadavg())
     print(
         f"\n# validation end to end: {count} belgioioso pairs, bundled vgmnet, batch {B}, "
-        f"pinned to 2 cores; max |Δp| between the paths {diff:.1e}; load average {load}"
+        f"pinned to 2 cores; max |Δp| between the paths {diff:.1e}; load average {load}; "
+        f"{unsure:.0%} of the pairs unsure (p in {look.band}), looked at again"
     )
     header = ["path", "threads", "pairs/s (wall)", "ratio", "pairs per CPU-s", "ratio"]
     print(table(header, rows))
-    print(f"target ≥ 3,000 pairs/s (wall, 2 threads): {'met' if now >= 3000 else 'MISSED'}")
+    print(
+        f"target ≥ 3,000 pairs/s (wall, 2 threads, without a second look): "
+        f"{'met' if now >= 3000 else 'MISSED'}"
+    )
 
 
 def main() -> None:

@@ -383,3 +383,52 @@ def test_cells_path_trains_as_the_dense_network(occupancy):
         np.testing.assert_allclose(
             got.double().numpy(), want.numpy(), rtol=1e-4, atol=1e-6, err_msg=name
         )
+
+
+def test_second_look_averages_the_turned_pairs_inside_its_band_only(tmp_path):
+    """Pairs whose first p(success) lies inside the band get the mean logit over the pair
+    turned four ways, each turn computed here on its own; the others keep their first look."""
+    from vgm_studio.model.checkpoint import Checkpoint, save_checkpoint
+    from vgm_studio.model.registry import build_network
+    from vgm_studio.model.validator import SecondLook, Validator, input_spec, network_logits
+
+    torch.manual_seed(2)
+    net, hyper = build_network("vgmnet", {"figures": True})
+    samples = random_samples(24, seed=5)
+    net.eval()
+    spec = input_spec("vgmnet", hyper, VGMParams())
+    cpu = torch.device("cpu")
+    # The last layer scaled so that logits spread over a few units around 0, as a trained
+    # network's do near its cut (fresh weights give logits within 1e-3 of each other).
+    last = [m for m in net.modules() if isinstance(m, torch.nn.Linear)][-1]
+    with torch.inference_mode():
+        z = network_logits(net, spec, samples, cpu).float().numpy()
+        scale = 2.0 / float(z.std())
+        last.weight.mul_(scale)
+        last.bias.copy_((last.bias - float(z.mean())) * scale)
+    path = tmp_path / "m.pt"
+    save_checkpoint(path, Checkpoint("vgmnet", hyper=hyper, state_dict=net.state_dict()))
+    with torch.inference_mode():
+        turned = np.stack(
+            [
+                network_logits(net, spec, samples, cpu, np.full(len(samples), k * np.pi / 2))
+                .float()
+                .numpy()
+                for k in range(4)
+            ]
+        ).astype(np.float64)
+    first = 1.0 / (1.0 + np.exp(-turned[0]))
+    band = (float(np.quantile(first, 0.3)), float(np.quantile(first, 0.8)))
+    inside = (first > band[0]) & (first < band[1])
+    assert 0 < inside.sum() < len(samples)
+
+    look = SecondLook(turns=4, band=band)
+    got = Validator.load(path, device="cpu", second_look=look).predict_samples(samples, 10)
+    want = np.where(inside, 1.0 / (1.0 + np.exp(-turned.mean(axis=0))), first)
+    # The validator runs the network with batch norm folded in: the same to ~1e-5 a logit.
+    np.testing.assert_allclose(got, want, atol=1e-4)
+    # The turns do disagree, so the pairs inside the band did move.
+    moved = np.abs(got - first)[inside]
+    assert np.median(moved) > 1e-3, moved
+    alone = Validator.load(path, device="cpu").predict_samples(samples, 10)
+    np.testing.assert_allclose(alone, first, atol=1e-4)
