@@ -149,6 +149,11 @@ class ValidationConfig:
             With ``loop_threshold`` too, a loop must pass both: the higher cut wins.
         thresholds: What ``reference`` calls a success (only successes are kept).
         batch_size: Edges per forward pass of the model.
+        second_look: A network validator looks again at the edges it is unsure of (p between
+            0.02 and 0.98), its logits averaged over the pair turned this many ways
+            (``model.validator.SecondLook``; 1: off). On the eleven buildings' loops, each
+            judged by a model that never saw its building, it took the mean accuracy from
+            0.949 to 0.954 and lowered none.
     """
 
     validator: ValidatorName = "vgmnet"
@@ -157,6 +162,7 @@ class ValidationConfig:
     loop_precision: float | None = None
     thresholds: LabelThresholds = field(default_factory=LabelThresholds)
     batch_size: int = 64
+    second_look: int = 4
 
 
 @dataclass(frozen=True)

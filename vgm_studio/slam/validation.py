@@ -88,7 +88,10 @@ class EdgeValidator:
                 )
                 for e in edges
             ]
-            p = self.model.predict_samples(samples, self.config.batch_size)
+            from vgm_studio.model.validator import SecondLook  # torch is loaded by now
+
+            look = SecondLook(turns=self.config.second_look)
+            p = self.model.predict_samples(samples, self.config.batch_size, look)
             keep = self.model.decide(p)
             loop = np.array([e.kind == "loop" for e in edges])
             if self.config.loop_threshold is not None:

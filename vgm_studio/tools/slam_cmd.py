@@ -70,6 +70,15 @@ def slam(
             callback=number(0, 1),
         ),
     ] = 0.0,
+    second_look: Annotated[
+        int,
+        typer.Option(
+            help="A model validator looks again at the edges it is unsure of (p between "
+            "0.02 and 0.98), its logits averaged over the pair turned this many ways "
+            "(1: off).",
+            min=1,
+        ),
+    ] = 4,
     robust: Annotated[
         RobustChoice,
         typer.Option(help="Back-end outlier handling: none, huber kernels, or gnc (TLS)."),
@@ -176,6 +185,7 @@ def slam(
             model=validator_model(validator, model),
             loop_threshold=loop_threshold or None,
             loop_precision=loop_precision or None,
+            second_look=second_look,
         ),
         consistency=ConsistencyConfig(enabled=consistency is ConsistencyChoice.pcm),
         graph=GraphConfig(robust=robust.value),
