@@ -1,0 +1,63 @@
+"""The SLAM validator's second look at the edges it is unsure of (``--second-look``)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vgm_studio.core import se2
+from vgm_studio.datasets import open_log
+from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.model.registry import BUNDLED_MODEL
+from vgm_studio.simulation.simulate import SimConfig, simulate
+from vgm_studio.slam.config import ValidationConfig
+from vgm_studio.slam.edges import SlamEdge
+from vgm_studio.slam.validation import EdgeValidator
+from vgm_studio.tools import cmd
+
+
+@pytest.fixture(scope="module")
+def office(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("office")
+    return simulate(SimConfig(preset="office", seed=6, num_beams=181, laps=0.3), folder)
+
+
+def test_the_slam_validator_looks_again_only_at_the_edges_it_is_unsure_of(office):
+    """Matches slid by 0–0.5 m along x, so that the bundled model is sure of some and
+    unsure of others: with ``second_look`` 4 the sure ones keep their p(success) to the bit
+    and every unsure one moves."""
+    scans = open_log(office).scans[::4][:40]
+    truth = np.array([s.reference for s in scans])
+    matcher = ScanMatcher()
+    edges = []
+    for k, slide in zip(range(1, len(scans)), np.linspace(0.0, 0.5, len(scans) - 1), strict=True):
+        step = se2.between(truth[k - 1], truth[k])
+        match = matcher.match(scans[k - 1], scans[k], step)
+        slid = dataclasses.replace(match, estimate=se2.compose(step, np.array([slide, 0, 0])))
+        edges.append(SlamEdge("loop", k - 1, k, step, slid))
+
+    p = {}
+    for turns in (1, 4):
+        config = ValidationConfig(model=BUNDLED_MODEL, second_look=turns)
+        judged = [dataclasses.replace(e) for e in edges]
+        EdgeValidator(config, scans)(judged)
+        p[turns] = np.array([e.p_success for e in judged])
+    unsure = (p[1] > 0.02) & (p[1] < 0.98)
+    assert 0 < unsure.sum() < len(edges), p[1]
+    assert np.array_equal(p[4][~unsure], p[1][~unsure])
+    assert np.all(np.abs(p[4][unsure] - p[1][unsure]) > 1e-6)
+
+
+def test_second_look_is_recorded_and_checked_on_the_command_line(office, tmp_path, capsys):
+    out = tmp_path / "run.json"
+    cmd.main(["slam", str(office), "--second-look", "2", "--json", str(out)])
+    assert json.loads(out.read_text())["settings"]["validation"]["second_look"] == 2
+    with pytest.raises(SystemExit) as stop:
+        cmd.main(["slam", str(office), "--second-look", "0"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--second-look" in err[0]
