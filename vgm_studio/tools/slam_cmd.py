@@ -75,10 +75,10 @@ def slam(
         typer.Option(
             help="A model validator looks again at the edges it is unsure of (p between "
             "0.02 and 0.98), its logits averaged over the pair turned this many ways "
-            "(1: off).",
+            "(1: off; e.g. 4).",
             min=1,
         ),
-    ] = 4,
+    ] = 1,
     robust: Annotated[
         RobustChoice,
         typer.Option(help="Back-end outlier handling: none, huber kernels, or gnc (TLS)."),
