@@ -179,9 +179,9 @@ class SecondLook:
     pair turned by ``turns`` evenly spaced rotations, the first look's among them.
 
     The networks were trained on pairs turned at random, so each turn is another draw of the
-    grid's cells: an ensemble of one network. Pairs it is sure of are not looked at again;
-    outside the band the mean of four turns flipped no decision on the eleven buildings'
-    loops (``benchmarks/bench_generalisation.py --second-look``).
+    grid's cells: an ensemble of one network. Pairs it is sure of are not looked at again:
+    looking again at every pair gave the same accuracy on each of the eleven buildings' loops
+    (``benchmarks/bench_generalisation.py --second-look``).
 
     Attributes:
         turns: Rotations in all, the unturned one included (1: no second look).
