@@ -124,8 +124,7 @@ def _end_to_end_table(log, count: int, rounds: int) -> None:
     samples = _samples(log, count)
     first = validator.predict_samples(samples, batch_size=B)
     unsure = float(np.mean((first > look.band[0]) & (first < look.band[1])))
-    old = _per_pair_logits(validator, samples, B)
-    diff = float(np.abs(old - validator.predict_samples(samples, batch_size=B)).max())
+    diff = float(np.abs(_per_pair_logits(validator, samples, B) - first).max())
     paths = (
         ("per-pair VGMs, dense network (before)", lambda: _per_pair_logits(validator, samples, B)),
         ("batched VGM cells, sparse stem (now)", lambda: validator.predict_samples(samples, B)),

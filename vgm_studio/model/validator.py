@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import torch
 from numpy.typing import NDArray
+from scipy.special import logit
 from torch import nn
 
 from vgm_studio.matching.edge_scans import EdgeScans
@@ -206,8 +207,7 @@ def batched_logits(
     out = _logits(net, spec, samples, device, batch_size)
     if second_look is None or second_look.turns < 2:
         return out
-    with np.errstate(divide="ignore"):  # a band from 0 or to 1 is a logit of ∓inf
-        lo, hi = (float(np.log(p) - np.log1p(-p)) for p in second_look.band)
+    lo, hi = logit(second_look.band)
     unsure = np.flatnonzero((out > lo) & (out < hi))
     if len(unsure) == 0:
         return out

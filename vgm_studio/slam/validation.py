@@ -24,7 +24,7 @@ from vgm_studio.slam.config import ValidationConfig
 from vgm_studio.slam.edges import SlamEdge
 
 if TYPE_CHECKING:
-    from vgm_studio.model.validator import Validator
+    from vgm_studio.model.validator import SecondLook, Validator
 
 
 class EdgeValidator:
@@ -56,8 +56,12 @@ class EdgeValidator:
                 "--validator reference needs reference poses: a log with TRUEPOS or a "
                 "corrected log, or --reference with one",
             )
+        self.look: SecondLook | None = None
         if config.validator in VALIDATOR_MODELS:
             self.model = _load(config.model, config.validator)
+            from vgm_studio.model.validator import SecondLook  # torch is loaded by now
+
+            self.look = SecondLook(turns=config.second_look)
         self.precision_cut: float | None = None
         if config.loop_precision is not None:
             if self.model is None:
@@ -88,10 +92,7 @@ class EdgeValidator:
                 )
                 for e in edges
             ]
-            from vgm_studio.model.validator import SecondLook  # torch is loaded by now
-
-            look = SecondLook(turns=self.config.second_look)
-            p = self.model.predict_samples(samples, self.config.batch_size, look)
+            p = self.model.predict_samples(samples, self.config.batch_size, self.look)
             keep = self.model.decide(p)
             loop = np.array([e.kind == "loop" for e in edges])
             if self.config.loop_threshold is not None:
