@@ -14,6 +14,8 @@ from vgm_studio.matching.correlative import LoopMatcher, SearchWindow
 from vgm_studio.matching.descriptor import DescriptorConfig, PlaceIndex, describe
 from vgm_studio.matching.submap import Submap
 from vgm_studio.simulation.simulate import SimConfig, simulate
+from vgm_studio.slam.config import FrontEndConfig
+from vgm_studio.slam.loop_search import trail
 
 
 @pytest.fixture(scope="module")
@@ -121,3 +123,40 @@ def test_query_keeps_to_max_key_and_k():
     assert all(a.distance <= b.distance for a, b in itertools.pairwise(got))
     limited = index.query(scans[9], k=4, max_key=40)
     assert len(limited) == 4 and all(m.key <= 40 for m in limited)
+
+
+def test_a_trail_tells_apart_places_whose_single_scans_look_alike(loop_world):
+    # One scan of a corridor looks like many others; the scans of the last metres of the path
+    # (placed by the poses, here the truth) add the turns and doors that led there. Lap 2's
+    # keyframes, described by their scan alone and by their 10 m trail, against lap 1's.
+    log, ref, keyframes, lap2 = loop_world
+    scans = [log.scans[k] for k in keyframes]
+    poses = ref[keyframes]
+    first = int(np.searchsorted(keyframes, lap2))
+    one = trail(first + 5, scans, poses, 0.0)
+    np.testing.assert_array_equal(one, scans[first + 5].points())
+    # The scan before, placed in this keyframe's frame, is part of the trail.
+    before = se2.transform_points(
+        se2.between(poses[first + 5], poses[first + 4]), scans[first + 4].points()
+    )
+    longer = trail(first + 5, scans, poses, 10.0)
+    assert len(longer) > len(one) + len(before) - 1
+    np.testing.assert_allclose(longer[len(one) : len(one) + len(before)], before)
+    found = {}
+    for metres in (0.0, 10.0):
+        index = PlaceIndex()
+        for k in range(first):
+            index.add(k, trail(k, scans, poses, metres))
+        hits = total = 0
+        for q in range(first, len(scans)):
+            near = np.hypot(*(poses[:first, :2] - poses[q, :2]).T) < 2.0
+            same_way = np.abs(se2.wrap_angle(poses[:first, 2] - poses[q, 2])) < np.radians(45)
+            truth = set(np.flatnonzero(near & same_way).tolist())
+            if not truth:
+                continue
+            total += 1
+            (best,) = index.query(trail(q, scans, poses, metres), k=1, max_key=first - 1)
+            hits += best.key in truth and best.distance <= FrontEndConfig().place_max_distance
+        found[metres] = hits / total
+    assert total >= 50
+    assert found[10.0] >= 1.3 * found[0.0], found

@@ -35,7 +35,7 @@ from vgm_studio.matching.submap import Submap
 from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
 from vgm_studio.slam.consistency import Loop, consistent
 from vgm_studio.slam.edges import SlamEdge, SlamEdgeKind, Validate
-from vgm_studio.slam.loop_search import Candidate, place_candidates, window_candidates
+from vgm_studio.slam.loop_search import Candidate, place_candidates, trail, window_candidates
 from vgm_studio.slam.sequential import SequentialMatcher
 from vgm_studio.slam.uncertainty import UncertaintyGraph
 
@@ -236,9 +236,9 @@ class FrontEnd:
         covered = {c.b for c in candidates if c.covers}
         drifted = [b for b in block if b in proposed and b not in covered]
         unseen = [b for b in block if b not in proposed]
-        candidates += place_candidates(unseen, self._places, self.scans, cfg)
+        candidates += place_candidates(unseen, self._places, self._trail, cfg)
         candidates += place_candidates(
-            drifted, self._places, self.scans, cfg, cfg.place_candidates_drifted
+            drifted, self._places, self._trail, cfg, cfg.place_candidates_drifted
         )
         candidates += self._injected(block)
         # Submaps first (shared by candidates), then the matches, both on every thread: the
@@ -256,9 +256,12 @@ class FrontEnd:
             self._add(graph_edge(e, self.graph))
         self.edges.extend(edges)
         for b in block:
-            self._places.add(b, self.scans[b].points())
+            self._places.add(b, self._trail(b))
         if kept:
             self.estimate.update(extra_iterations=2)
+
+    def _trail(self, k: int) -> NDArray[np.float64]:
+        return trail(k, self.scans, self.estimate.poses, self.config.place_trail)
 
     def _injected(self, block: range) -> list[Candidate]:
         out = []

@@ -10,16 +10,18 @@ spans metres. The nearest candidates by that distance are matched over a search 
 three σ, clamped.
 
 Place: wherever the window cannot cover three σ (the drift outgrew the widest window) or
-finds nothing, the keyframe's scan descriptor (a Scan Context for 2D lasers, Kim and Kim 2018)
-against those of all earlier keyframes (a KD-tree of rotation-invariant ring keys, re-ranked
-by the column-shift distance; see ``matching.descriptor``); the estimate is not consulted, so
-a revisit is proposed even tens of metres off. Its window is centred on the descriptor's yaw.
+finds nothing, the descriptor of the keyframe's trail against those of all earlier keyframes
+(a Scan Context for 2D lasers, Kim and Kim 2018, in a KD-tree of rotation-invariant ring keys,
+re-ranked by the column-shift distance; see ``matching.descriptor``). A trail is the scan and
+those of the last metres of the path, placed by the estimate: over a few metres it is sure of
+them even where it has lost the building, so a revisit is proposed even tens of metres off.
+Its window is centred on the descriptor's yaw.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,6 +34,10 @@ from vgm_studio.matching.descriptor import PlaceIndex
 from vgm_studio.slam.config import FrontEndConfig
 from vgm_studio.slam.edges import EdgeSource
 from vgm_studio.slam.uncertainty import Relative, UncertaintyGraph
+
+# At most this many scans in a trail: where keyframes are close (a robot turning on the
+# spot), a few metres of path would otherwise hold hundreds.
+_TRAIL_SCANS = 40
 
 
 @dataclass(frozen=True)
@@ -103,15 +109,35 @@ def _window_of(
     return out
 
 
+def trail(
+    k: int, scans: Sequence[Scan], poses: NDArray[np.float64], metres: float
+) -> NDArray[np.float64]:
+    """Keyframe k's scan and those of the keyframes before it on the last ``metres`` of its
+    path, in k's frame, placed by ``poses``: what place recognition describes k by (0: the
+    scan alone)."""
+    points = [scans[k].points()]
+    travelled, j = 0.0, k
+    while metres > 0 and j > 0 and len(points) < _TRAIL_SCANS:
+        travelled += math.dist(poses[j, :2], poses[j - 1, :2])
+        if travelled > metres:
+            break
+        j -= 1
+        points.append(se2.transform_points(se2.between(poses[k], poses[j]), scans[j].points()))
+    return np.concatenate(points)
+
+
 def place_candidates(
     keyframes: Sequence[int],
     index: PlaceIndex,
-    scans: Sequence[Scan],
+    cloud: Callable[[int], NDArray[np.float64]],
     config: FrontEndConfig,
     per_keyframe: int | None = None,
 ) -> list[Candidate]:
-    """Earlier keyframes whose scan looks like that of each of ``keyframes``, whatever the
+    """Earlier keyframes whose place looks like that of each of ``keyframes``, whatever the
     estimate.
+
+    ``cloud(k)`` is what keyframe k is described by, in its own frame: its scan, or its trail
+    (``FrontEndConfig.place_trail``), as the index holds the earlier ones.
 
     The guess is "b stands where a stood, turned by the descriptor's yaw"; the window is the
     widest in x and y and ``place_angular_deg`` around that yaw. Pairs turned further than
@@ -130,7 +156,7 @@ def place_candidates(
         newest = b - config.loop_min_gap
         if newest < 0:
             continue
-        for m in index.query(scans[b].points(), k=count, max_key=newest):
+        for m in index.query(cloud(b), k=count, max_key=newest):
             if m.distance > config.place_max_distance or abs(m.yaw) > max_turn:
                 continue
             guess = np.array([0.0, 0.0, m.yaw])
