@@ -8,7 +8,9 @@
    against the pairwise ScanMatcher; converged = within 0.1 m and 2° of the reference.
 3. Place recognition: recall@k of the Scan Context index. Every keyframe (1 m / 30°) queries the
    keyframes at least 20 m of travel before it; a revisit is a query with one of those within
-   2 m and 45°, and it is found when one such keyframe is among the k best.
+   2 m and 45°, and it is found when one such keyframe is among the k best. Each keyframe is
+   described by its scan alone, then by its 10 m trail (``slam.loop_search.trail``, placed by
+   the reference poses), as the SLAM front end describes them.
 
 Run: python benchmarks/bench_correlative.py [--quick]
 """
@@ -27,6 +29,8 @@ OFFSETS = ((0.5, 5.0), (1.0, 10.0), (2.0, 25.0))
 GAP_METRES = 20.0
 SPAN = 2  # keyframes each side of the loop target in its submap
 RECALL_K = (1, 5, 10)
+# Each keyframe described by its scan alone, and by its trail (the SLAM front end's default).
+TRAILS = (0.0, 10.0)
 CORRECTED = ("intel/intel.gfs.log", *(f"radish-corrected/{n}-corrected.log" for n in (
     "fhw", "csail", "freiburg-101", "orebro", "infinite-corridor")))  # fmt: skip
 
@@ -131,34 +135,37 @@ def convergence_rows(name, log, cases):
     return rows
 
 
-def recall_row(name, log):
-    """Recall@k of the place index over the log's revisits (see the module docstring)."""
+def recall_row(name, log, trail_metres=0.0):
+    """Recall@k of the place index over the log's revisits (see the module docstring), each
+    keyframe described by its trail of ``trail_metres`` (0: its scan alone)."""
     from vgm_studio.core import se2
     from vgm_studio.matching.descriptor import PlaceIndex
+    from vgm_studio.slam.loop_search import trail
 
     ref = log.reference_poses()
     kf = _keyframes(ref)
-    travel = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(ref[:, :2], axis=0).T))])
+    scans, poses = [log.scans[i] for i in kf], ref[kf]
+    travel = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(ref[:, :2], axis=0).T))])[kf]
     index, found, total, secs = PlaceIndex(), dict.fromkeys(RECALL_K, 0), 0, []
     added = 0
-    for q in kf:
-        while added < len(kf) and travel[kf[added]] <= travel[q] - GAP_METRES:
-            index.add(int(kf[added]), log.scans[kf[added]].points())
+    for q in range(len(kf)):
+        while added < len(kf) and travel[added] <= travel[q] - GAP_METRES:
+            index.add(added, trail(added, scans, poses, trail_metres))
             added += 1
-        prior = kf[:added]
-        near = np.hypot(*(ref[prior, :2] - ref[q, :2]).T) < 2.0
-        same_way = np.abs(se2.wrap_angle(ref[prior, 2] - ref[q, 2])) < np.radians(45)
-        truth = set(prior[near & same_way].tolist())
+        near = np.hypot(*(poses[:added, :2] - poses[q, :2]).T) < 2.0
+        same_way = np.abs(se2.wrap_angle(poses[:added, 2] - poses[q, 2])) < np.radians(45)
+        truth = set(np.flatnonzero(near & same_way).tolist())
         if not truth:
             continue
         total += 1
         t = time.perf_counter()
-        got = index.query(log.scans[q].points(), k=max(RECALL_K))
+        got = index.query(trail(q, scans, poses, trail_metres), k=max(RECALL_K))
         secs.append(time.perf_counter() - t)
         for k in RECALL_K:
             found[k] += any(m.key in truth for m in got[:k])
     cells = [f"{found[k] / total:.2f}" if total else "–" for k in RECALL_K]
-    return [name, str(len(kf)), str(total), *cells, f"{np.median(secs) * 1e3:.1f}"]
+    described = f"{trail_metres:.0f} m trail" if trail_metres else "scan"
+    return [name, described, str(len(kf)), str(total), *cells, f"{np.median(secs) * 1e3:.1f}"]
 
 
 def main() -> None:
@@ -186,10 +193,16 @@ def main() -> None:
         rows = [r for n in logs for r in convergence_rows(n, logs[n], cases[n])]
         print(table(["pairs", "guess off by", "pairs", "LoopMatcher", "ScanMatcher"], rows))
         print(f"\n## Place recognition recall@k (queries ≥ {GAP_METRES:.0f} m of travel on)\n")
-        rows = [recall_row(f"sim {p}, 2 laps", log) for p, log in sims.items()]
+        rows = [
+            recall_row(f"sim {p}, 2 laps", log, metres)
+            for p, log in sims.items()
+            for metres in TRAILS
+        ]
     for rel in CORRECTED[:2] if quick else CORRECTED:
-        rows.append(recall_row(Path(rel).name, open_log(data / rel)))
-    header = ["log", "keyframes", "revisits", *(f"@{k}" for k in RECALL_K), "query ms"]
+        log = open_log(data / rel)
+        rows += [recall_row(Path(rel).name, log, metres) for metres in TRAILS]
+    header = ["log", "described by", "keyframes", "revisits"]
+    header += [*(f"@{k}" for k in RECALL_K), "query ms"]
     print(table(header, rows))
 
 
