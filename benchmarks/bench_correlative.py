@@ -10,7 +10,7 @@
    keyframes at least 20 m of travel before it; a revisit is a query with one of those within
    2 m and 45°, and it is found when one such keyframe is among the k best. Each keyframe is
    described by its scan alone, then by its 10 m trail (``slam.loop_search.trail``, placed by
-   the reference poses), as the SLAM front end describes them.
+   the reference poses): the SLAM front end proposes the best of both.
 
 Run: python benchmarks/bench_correlative.py [--quick]
 """
@@ -29,7 +29,7 @@ OFFSETS = ((0.5, 5.0), (1.0, 10.0), (2.0, 25.0))
 GAP_METRES = 20.0
 SPAN = 2  # keyframes each side of the loop target in its submap
 RECALL_K = (1, 5, 10)
-# Each keyframe described by its scan alone, and by its trail (the SLAM front end's default).
+# Each keyframe described by its scan alone, and by its trail: the SLAM front end uses both.
 TRAILS = (0.0, 10.0)
 CORRECTED = ("intel/intel.gfs.log", *(f"radish-corrected/{n}-corrected.log" for n in (
     "fhw", "csail", "freiburg-101", "orebro", "infinite-corridor")))  # fmt: skip

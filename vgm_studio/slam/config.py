@@ -42,12 +42,12 @@ class FrontEndConfig:
             (0 same, 1 nothing in common).
         place_angular_deg: Half-width in heading of a place candidate's window around the
             descriptor's yaw guess, degrees.
-        place_trail: Place recognition describes each keyframe by its scan and those of the
-            keyframes on the last this-many metres of its path, placed by the estimate (0:
-            the scan alone). One 180° scan of a corridor looks like many others; the walls,
-            doors and turns of the path that led there tell them apart (CSAIL: the right
-            place first among the descriptor's neighbours 2.6× as often with 10 m as with the
-            scan alone, Örebro 1.4×).
+        place_trail: Place recognition also describes each keyframe by its trail: its scan
+            and those of the keyframes on the last this-many metres of its path, placed by the
+            estimate (0: by its scan alone). One 180° scan of a corridor looks like many
+            others; the doors and turns of the path that led there tell them apart (CSAIL: the
+            right place first 1.7× as often), but only where the robot came the same way, so
+            the scan's own candidates are kept too.
         drift_sigma_xy: How far a kept sequential edge may be off, as the loop search sees it,
             metres (added to the matcher's covariance). The graph's own floors
             (``GraphConfig``) weight edges against each other and are far wider than a

@@ -10,12 +10,13 @@ spans metres. The nearest candidates by that distance are matched over a search 
 three σ, clamped.
 
 Place: wherever the window cannot cover three σ (the drift outgrew the widest window) or
-finds nothing, the descriptor of the keyframe's trail against those of all earlier keyframes
-(a Scan Context for 2D lasers, Kim and Kim 2018, in a KD-tree of rotation-invariant ring keys,
-re-ranked by the column-shift distance; see ``matching.descriptor``). A trail is the scan and
-those of the last metres of the path, placed by the estimate: over a few metres it is sure of
-them even where it has lost the building, so a revisit is proposed even tens of metres off.
-Its window is centred on the descriptor's yaw.
+finds nothing, the keyframe's descriptors against those of all earlier keyframes (a Scan
+Context for 2D lasers, Kim and Kim 2018, in a KD-tree of rotation-invariant ring keys,
+re-ranked by the column-shift distance; see ``matching.descriptor``): one of its scan and one
+of its trail, the scan and those of the last metres of the path placed by the estimate, which
+is sure of a few metres even where it has lost the building. Neither reads where the estimate
+puts the keyframe, so a revisit is proposed even tens of metres off. Its window is centred on
+the descriptor's yaw.
 """
 
 from __future__ import annotations
