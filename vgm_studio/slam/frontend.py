@@ -274,10 +274,10 @@ class FrontEnd:
         """Place candidates of ``keyframes`` by their scans and by their trails, each pair
         once.
 
-        A trail tells a corridor's look-alike places apart (CSAIL: the right place first 2.6×
+        A trail tells a corridor's look-alike places apart (CSAIL: the right place first 1.7×
         as often), but only where the robot came the same way; a scan also finds a place
-        reached from another direction (a junction: on Intel, FHW and Freiburg 101 the scan
-        alone ranks the right place first as often or more often).
+        reached from another direction (at junctions: on Intel, FHW and Freiburg 101 the scan
+        alone ranks the right place among the first five as often or more often).
         """
         out = place_candidates(keyframes, self._places, self._scan, self.config, count)
         if self.config.place_trail > 0:
