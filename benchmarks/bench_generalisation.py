@@ -137,6 +137,7 @@ def _fold_rows(fold, data, origin: list[str], models: list[str], args) -> list[l
     rows = []
     for model in models:
         out = BUILD / "folds" / f"{fold.held_out}-{model}.pt"
+        out.parent.mkdir(parents=True, exist_ok=True)  # a fresh clone has no build/ yet
         epochs, epoch_size = _recipe(model)
         config = TrainConfig(
             model=model,
