@@ -240,8 +240,11 @@ class FrontEnd:
         covered = {c.b for c in candidates if c.covers}
         drifted = [b for b in block if b in proposed and b not in covered]
         unseen = [b for b in block if b not in proposed]
-        candidates += self._place_candidates(unseen, cfg.place_candidates)
-        candidates += self._place_candidates(drifted, cfg.place_candidates_drifted)
+        # Each trail once: queried here, added to the index below, at the same estimate.
+        reach = cfg.place_trail
+        trails = {b: trail(b, self.scans, poses, reach) for b in block} if reach > 0 else {}
+        candidates += self._place_candidates(unseen, cfg.place_candidates, trails)
+        candidates += self._place_candidates(drifted, cfg.place_candidates_drifted, trails)
         candidates += self._injected(block)
         # Submaps first (shared by candidates), then the matches, both on every thread: the
         # searches are numpy gathers that release the GIL, and each match is independent.
@@ -259,20 +262,19 @@ class FrontEnd:
         self.edges.extend(edges)
         for b in block:
             self._places.add(b, self.scans[b].points())
-            if cfg.place_trail > 0:
-                self._trails.add(b, self._trail(b))
+            if trails:
+                self._trails.add(b, trails[b])
         if kept:
             self.estimate.update(extra_iterations=2)
 
     def _scan(self, k: int) -> NDArray[np.float64]:
         return self.scans[k].points()
 
-    def _trail(self, k: int) -> NDArray[np.float64]:
-        return trail(k, self.scans, self.estimate.poses, self.config.place_trail)
-
-    def _place_candidates(self, keyframes: list[int], count: int) -> list[Candidate]:
-        """Place candidates of ``keyframes`` by their scans and by their trails, each pair
-        once.
+    def _place_candidates(
+        self, keyframes: list[int], count: int, trails: dict[int, NDArray[np.float64]]
+    ) -> list[Candidate]:
+        """Place candidates of ``keyframes`` by their scans and by their ``trails`` (none
+        when ``place_trail`` is 0), each pair once.
 
         A trail tells a corridor's look-alike places apart (CSAIL: the right place first 1.7×
         as often), but only where the robot came the same way; a scan also finds a place
@@ -280,9 +282,9 @@ class FrontEnd:
         alone ranks the right place among the first five as often or more often).
         """
         out = place_candidates(keyframes, self._places, self._scan, self.config, count)
-        if self.config.place_trail > 0:
+        if trails:
             seen = {(c.a, c.b) for c in out}
-            more = place_candidates(keyframes, self._trails, self._trail, self.config, count)
+            more = place_candidates(keyframes, self._trails, trails.__getitem__, self.config, count)
             out += [c for c in more if (c.a, c.b) not in seen]
         return out
 
