@@ -223,3 +223,58 @@ def test_two_groups_of_surprises_that_tell_two_stories_are_both_left_out():
     assert flags[: len(right)].all() and not flags[len(right) :].any()
     # Two aliases would not pass on their own: no rival.
     assert consistent(right[:3] + alias[:2], estimate, wide, config, drift=drift)[:3].all()
+
+
+def test_support_counts_only_loops_whose_ends_the_drift_holds_close():
+    """CSAIL: an alias 10.7 m off joined two right loops whose targets lay 90 keyframes from
+    its own, across steps where the odometry was lost. The cycle test passed because that
+    chain could bend either way; it says nothing, so such a loop is no support."""
+    truth = ring()
+    wide = chain(truth, LOOP_COV * 25)
+    lost = np.diag([0.03**2, 0.03**2, math.radians(2.0) ** 2])
+    drift = UncertaintyGraph()
+    for i in range(1, len(truth)):
+        cov = lost if i <= 20 else STEP_COV
+        drift.add(GraphEdge(i - 1, i, se2.between(truth[i - 1], truth[i]), cov, True))
+    assert drift.relative([0], len(truth))[0].position_var[20] > 0.5**2
+    estimate = truth.copy()
+    estimate[60:, :2] += 1.5
+    config = ConsistencyConfig(min_support=1, support_sigma=0.5)
+
+    def place(a: int, b: int, off: float = 0.0) -> Loop:
+        z = se2.compose(se2.between(truth[a], truth[b]), [off, 0.0, 0.0])
+        return Loop(a, b, z, LOOP_COV, place=True)
+
+    right = [place(0, 90), place(2, 92)]
+    alias = place(20, 94, off=3.0)  # a door along, across the stretch the odometry lost
+    # Alone, a place loop is not enough; two neighbours that agree are.
+    assert not consistent(right[:1], estimate, wide, config, drift=drift)[0]
+    assert consistent(right, estimate, wide, config, drift=drift).all()
+    flags = consistent([*right, alias], estimate, wide, config, drift=drift)
+    assert flags[:2].all() and not flags[2]
+    # Counting far loops as support, the alias would ride in with them.
+    anywhere = ConsistencyConfig(min_support=1, support_sigma=math.inf)
+    assert consistent([*right, alias], estimate, wide, anywhere, drift=drift).all()
+
+
+def test_keyframes_passed_the_other_way_get_their_own_slot_and_take_none_of_the_others():
+    """Out along a corridor, back along its other side, out again near the back lane: the
+    back lane lies nearest but faced the other way. It must not crowd out the same-way pass,
+    and the revisit the other way is still proposed."""
+    out_back = out_and_back(length=30.0)
+    again = out_back[:60].copy()
+    again[:, 1] = 0.9
+    poses = np.vstack([out_back, again])
+    graph = chain(poses)
+    block = range(len(poses) - 30, len(poses) - 25)
+    config = FrontEndConfig(loops_per_keyframe=2, turned_loops_per_keyframe=1)
+    found = window_candidates(block, poses, graph, config)
+    out_leg, back_leg = range(0, 60), range(60, 120)
+    for b in block:
+        mine = [c.a for c in found if c.b == b]
+        assert sum(a in out_leg for a in mine) == 2
+        assert sum(a in back_leg for a in mine) == 1
+        # The same-way candidates are the nearest of the out leg, where b is again.
+        assert all(abs(poses[a, 0] - poses[b, 0]) <= 0.5 for a in mine if a in out_leg)
+    same_way_only = FrontEndConfig(loops_per_keyframe=2, turned_loops_per_keyframe=0)
+    assert {c.a for c in window_candidates(block, poses, graph, same_way_only)} <= set(out_leg)

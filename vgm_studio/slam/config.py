@@ -26,8 +26,8 @@ class FrontEndConfig:
         loop_radius: Where the graph is certain, loop candidates lie within this distance in
             the current estimate, metres; the window grows with the graph's uncertainty
             between the two keyframes (``slam.loop_search``).
-        loop_max_angle_deg: …and within this heading difference (a 180° scanner sees little of
-            a place it faced away from), degrees, widened by three σ of the heading.
+        loop_max_angle_deg: …and within this heading difference, degrees, widened by three σ
+            of the heading (``turned_loops_per_keyframe`` more are searched beyond it).
         loop_gate: Window candidates pass a Mahalanobis gate at this χ²(2) probability.
         window_linear: (min, max) half-width of a loop's search window in x and y, metres:
             three σ of the relative position, clamped.
@@ -42,6 +42,8 @@ class FrontEndConfig:
             (0 same, 1 nothing in common).
         place_angular_deg: Half-width in heading of a place candidate's window around the
             descriptor's yaw guess, degrees.
+        place_max_angle_deg: …and whose yaw (the descriptor's guess of the turn between
+            the two) is at most this, degrees.
         place_trail: Place recognition also describes each keyframe by its trail: its scan
             and those of the keyframes on the last this-many metres of its path, placed by the
             estimate (0: by its scan alone). One 180° scan of a corridor looks like many
@@ -94,6 +96,10 @@ class FrontEndConfig:
             many keyframes on each side of it.
         loop_min_gap: …and at least this many keyframes earlier.
         loops_per_keyframe: The nearest this many candidates of each keyframe are matched.
+        turned_loops_per_keyframe: …and this many more among the keyframes turned further
+            than ``loop_max_angle_deg`` from it: a corridor driven back the other way shares
+            its side walls, and the submap around the target saw what lies behind the robot
+            (CSAIL: most revisits are 90–170° turned).
         block: Keyframes added between two updates of the running estimate: the validator
             and the incremental solver work on whole blocks.
         false_loops: Deliberately wrong loop closures to inject (robustness tests in the style
@@ -117,6 +123,7 @@ class FrontEndConfig:
     place_candidates_drifted: int = 3
     place_max_distance: float = 0.35
     place_angular_deg: float = 15.0
+    place_max_angle_deg: float = 180.0
     place_trail: float = 10.0
     drift_sigma_xy: float = 0.005
     drift_sigma_theta_deg: float = 0.03
@@ -132,6 +139,7 @@ class FrontEndConfig:
     submap_keyframes: int = 5
     loop_min_gap: int = 20
     loops_per_keyframe: int = 2
+    turned_loops_per_keyframe: int = 1
     block: int = 25
     false_loops: int = 0
     false_loop_distance: float = 5.0
@@ -188,16 +196,23 @@ class ConsistencyConfig:
             symmetric hall matched to its mirror) agrees with itself and would outvote it.
         min_support: A loop that moves the map by more than the scan matchers drift, or one
             from place recognition, is kept only in a group of more than this many agreeing
-            loops (0: alone too), and only where the loops it outvoted hold no rival group of
-            more than this many that is at least half its size. A revisit after long drift
+            loops near it (itself counted; 0: alone too; see ``support_sigma``), and only
+            where the loops it outvoted hold no rival group of more than this many that is at
+            least half its size. A revisit after long drift
             yields a run of loops from consecutive keyframes; one convincing alias in a
             corridor yields one, a periodic corridor a rival run.
+        support_sigma: …and the agreeing loops count as support only where the drift puts
+            their ends within this of the loop's ends (one σ, metres): the cycle test of two
+            loops then tells apart a loop from one ~3.4 σ off (its χ²(3) 99% gate), less than
+            a corridor's door spacing. Between far ends it passes because the chain could
+            bend either way, which says nothing.
     """
 
     enabled: bool = True
     probability: float = 0.99
     estimate_weight: int = 1000
-    min_support: int = 2
+    min_support: int = 1
+    support_sigma: float = 0.5
 
 
 @dataclass(frozen=True)

@@ -97,8 +97,17 @@ def _window_of(
     with np.errstate(invalid="ignore"):
         m2 = (offset[:, 0] ** 2 + offset[:, 1] ** 2) / (position_var + reach_var)
     turn = math.radians(config.loop_max_angle_deg) + 3.0 * heading_sigma
-    ok = np.isfinite(m2) & (m2 <= gate) & (np.abs(offset[:, 2]) <= turn)
-    chosen = olds[ok][np.argsort(m2[ok], kind="stable")][: config.loops_per_keyframe]
+    near = np.isfinite(m2) & (m2 <= gate)
+    facing = np.abs(offset[:, 2]) <= turn
+    # Each heading class has its own slots: in a corridor the keyframes passed the other way
+    # lie nearer than the last same-way pass and would take every slot (Örebro lost its one
+    # same-way revisit so, 0.76 → 1.43 m).
+    chosen = np.concatenate(
+        [
+            _nearest(olds, m2, near & facing, config.loops_per_keyframe),
+            _nearest(olds, m2, near & ~facing, config.turned_loops_per_keyframe),
+        ]
+    )
     lo_deg, hi_deg = config.window_angular_deg
     out = []
     for a in chosen:
@@ -108,6 +117,12 @@ def _window_of(
         covers = reach <= linear and turn_deg <= angular
         out.append(Candidate(int(a), b, "window", offset[a], linear, math.radians(angular), covers))
     return out
+
+
+def _nearest(
+    olds: NDArray[np.int64], m2: NDArray[np.float64], ok: NDArray[np.bool_], count: int
+) -> NDArray[np.int64]:
+    return olds[ok][np.argsort(m2[ok], kind="stable")][:count]
 
 
 def trail(
@@ -142,7 +157,7 @@ def place_candidates(
 
     The guess is "b stands where a stood, turned by the descriptor's yaw"; the window is the
     widest in x and y and ``place_angular_deg`` around that yaw. Pairs turned further than
-    ``loop_max_angle_deg`` are left out. ``per_keyframe`` nearest descriptors are tried
+    ``place_max_angle_deg`` are left out. ``per_keyframe`` nearest descriptors are tried
     (default ``config.place_candidates``).
     """
     count = config.place_candidates if per_keyframe is None else per_keyframe
@@ -150,9 +165,7 @@ def place_candidates(
         return []
     out = []
     angular = math.radians(config.place_angular_deg)
-    # Not the estimate but the sensor: a scanner that faced the other way saw other walls,
-    # and a corridor seen from its two ends looks alike (the descriptor's yaw is then ~180°).
-    max_turn = math.radians(config.loop_max_angle_deg)
+    max_turn = math.radians(config.place_max_angle_deg)
     for b in keyframes:
         newest = b - config.loop_min_gap
         if newest < 0:
