@@ -125,7 +125,8 @@ def _unsupported(
 
     def near(i: int, j: int) -> bool:
         one, two = loops[i], loops[j]
-        return rel[one.a].position_var[two.a] <= limit and rel[one.b].position_var[two.b] <= limit
+        var = max(rel[one.a].position_var[two.a], rel[one.b].position_var[two.b])
+        return bool(var <= limit)
 
     return {
         i
