@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -143,6 +144,10 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
     odometry = scan_odometry(log.scans, progress=progress)
     seconds["odometry"] = time.perf_counter() - t
     fe = config.front_end
+    if config.validation.validator == "none":
+        # ``none`` keeps every edge: no sequential match goes out for disagreeing with the
+        # odometry either, so ``before`` and ``after`` stay one graph.
+        fe = dataclasses.replace(fe, sequential_slide_check=False)
     pool = np.flatnonzero(usable)
     keyframes = pool[select_keyframes(odometry[pool], fe.keyframe_distance, fe.keyframe_angle_deg)]
     scans = [log.scans[i] for i in keyframes]
