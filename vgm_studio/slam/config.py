@@ -198,9 +198,9 @@ class ConsistencyConfig:
             from place recognition, is kept only in a group of more than this many agreeing
             loops near it (itself counted; 0: alone too; see ``support_sigma``), and only
             where the loops it outvoted hold no rival group of more than this many that is at
-            least half its size. A revisit after long drift
-            yields a run of loops from consecutive keyframes; one convincing alias in a
-            corridor yields one, a periodic corridor a rival run.
+            least half its size. A revisit after long drift yields a run of loops from
+            consecutive keyframes; one convincing alias in a corridor yields one, a periodic
+            corridor a rival run.
         support_sigma: …and the agreeing loops count as support only where the drift puts
             their ends within this of the loop's ends (one σ, metres): the cycle test of two
             loops then tells apart a loop from one ~3.4 σ off (its χ²(3) 99% gate), less than
