@@ -42,9 +42,12 @@ def racetrack(length: float = 100.0, width: float = 2.0, step: float = 0.5) -> n
 
 
 def chain(poses: np.ndarray, cov: np.ndarray = STEP_COV) -> UncertaintyGraph:
+    """Consecutive poses joined by edges of covariance ``cov``, or ``cov[i - 1]`` for the
+    edge into pose i where a stack of covariances is given."""
+    covs = cov if cov.ndim == 3 else [cov] * (len(poses) - 1)
     graph = UncertaintyGraph()
     for i in range(1, len(poses)):
-        graph.add(GraphEdge(i - 1, i, se2.between(poses[i - 1], poses[i]), cov, True))
+        graph.add(GraphEdge(i - 1, i, se2.between(poses[i - 1], poses[i]), covs[i - 1], True))
     return graph
 
 
@@ -232,10 +235,7 @@ def test_support_counts_only_loops_whose_ends_the_drift_holds_close():
     truth = ring()
     wide = chain(truth, LOOP_COV * 25)
     lost = np.diag([0.03**2, 0.03**2, math.radians(2.0) ** 2])
-    drift = UncertaintyGraph()
-    for i in range(1, len(truth)):
-        cov = lost if i <= 20 else STEP_COV
-        drift.add(GraphEdge(i - 1, i, se2.between(truth[i - 1], truth[i]), cov, True))
+    drift = chain(truth, np.array([lost if i <= 20 else STEP_COV for i in range(1, len(truth))]))
     assert drift.relative([0], len(truth))[0].position_var[20] > 0.5**2
     estimate = truth.copy()
     estimate[60:, :2] += 1.5

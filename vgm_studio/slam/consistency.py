@@ -111,9 +111,10 @@ def _unsupported(
     chain between them could bend either way, which says nothing. On CSAIL one alias 10.7 m
     off joined two right loops 90 keyframes away and stayed in.
     """
-    ends = sorted({x for i in members for x in (loops[i].a, loops[i].b)})
-    # The drift's projection costs a Dijkstra pass per end: asked only where it could matter.
-    rel = dict(zip(ends, drift.relative(ends, len(poses)), strict=True))
+    # The drift's projection costs a Dijkstra pass per end: the targets' for every member,
+    # the later ends' only for the surprises that must then find support.
+    targets = sorted({loops[i].a for i in members})
+    rel = dict(zip(targets, drift.relative(targets, len(poses)), strict=True))
     surprises = {
         i
         for i in members
@@ -121,6 +122,8 @@ def _unsupported(
     }
     if not surprises or _rivalled(votes, members, config.min_support):
         return surprises
+    later = sorted({loops[i].b for i in surprises} - rel.keys())
+    rel.update(zip(later, drift.relative(later, len(poses)), strict=True))
     limit = config.support_sigma**2
 
     def near(i: int, j: int) -> bool:
