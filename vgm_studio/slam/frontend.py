@@ -125,6 +125,10 @@ class FrontEnd:
         config: Keyframe, loop-search and injection settings.
         graph: Noise floors and robust settings for the running estimate.
         consistency: The group-consistency check of the loops the validator kept.
+        loop_bar: The p(success) a loop needs (``EdgeValidator.loop_bar``); a sequential
+            match found again over the wide window that says the odometry is off by more
+            than the smallest window needs it too (``SequentialMatcher.retry``). None: the
+            validator's own word.
     """
 
     def __init__(
@@ -136,8 +140,10 @@ class FrontEnd:
         config: FrontEndConfig,
         graph: GraphConfig,
         consistency: ConsistencyConfig | None = None,
+        loop_bar: float | None = None,
     ) -> None:
         self.scans = scans
+        self.loop_bar = loop_bar
         self.odometry = odometry
         self.matcher = matcher
         self.validate = validate
@@ -214,7 +220,7 @@ class FrontEnd:
         if self.config.sequential_slide_check and self.config.sequential_submap > 0:
             self._sequential_matcher.check_slides(edges)
         if self.config.sequential_retry and self.config.sequential_submap > 0:
-            self._sequential_matcher.retry(edges, self.validate)
+            self._sequential_matcher.retry(edges, self.validate, self.loop_bar)
         for e in edges:
             if e.kept:
                 factor = graph_edge(e, self.graph)

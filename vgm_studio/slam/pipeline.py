@@ -164,6 +164,7 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
         fe,
         config.graph,
         config.consistency,
+        validator.loop_bar,
     )
     edges = front.run(progress)
     seconds["front_end"] = time.perf_counter() - t

@@ -110,6 +110,15 @@ class EdgeValidator:
     def threshold(self) -> float:
         return self.model.threshold if self.model is not None else math.nan
 
+    @property
+    def loop_bar(self) -> float | None:
+        """The p(success) a loop needs (the highest of the model's threshold, the loop
+        threshold and the precision cut); None where the validator gives no p to weigh."""
+        if self.model is None:
+            return None
+        cuts = (self.config.loop_threshold, self.precision_cut)
+        return max(self.model.threshold, *(c for c in cuts if c is not None))
+
 
 def _load(path: Path | None, validator: str) -> Validator:
     from vgm_studio.model.cache import shared_validator
