@@ -257,3 +257,34 @@ def test_a_wide_match_that_turns_a_matched_chain_needs_a_match_across_two_steps(
         err = se2.between(step, edges[8].estimate)
         assert abs(err[2]) < math.radians(1.0) and math.hypot(err[0], err[1]) < 0.05
     assert all(e.kept for i, e in enumerate(edges) if i != 8)
+
+
+@pytest.mark.parametrize("p", [0.7, 0.9])
+def test_a_wide_match_that_says_the_odometry_is_off_needs_the_loop_bar(office, p):
+    """A rejected step whose odometry is 60° off, searched again over the wide window: the
+    right wide match says the odometry is wrong, a surprise like a loop, so it takes the
+    rejected match's place only where its p reaches the loop bar (CSAIL keyframes 52–53: a
+    wrong wide match 2.6 m sideways went in at p 0.72)."""
+    scans, truth = _first_keyframes(office, 30)
+    turn = math.radians(60.0)
+    k = 9  # edges[8] joins keyframes 8 and 9
+    odometry = truth.copy()
+    odometry[k] = se2.compose(truth[k], np.array([0.0, 0.0, -turn]))
+    odometry[k + 1 :] = se2.compose(odometry[k], se2.between(truth[k], truth[k + 1 :]))
+    aliasing = _AliasingMatcher(scans, truth, k, 0.0)
+    matcher = SequentialMatcher(scans, odometry, ScanMatcher(), aliasing, FrontEndConfig())
+    edges = matcher.match(range(1, 20), truth)
+    edges[8].kept = False
+    edges[8].match = dataclasses.replace(edges[8].match, inlier_ratio=0.5)
+    first = edges[8]
+
+    def passes_at_p(batch: list[SlamEdge]) -> None:
+        for e in batch:
+            e.kept, e.p_success = True, p
+
+    matcher.retry(edges, passes_at_p, loop_bar=0.8)
+    assert edges[8].kept == (p >= 0.8)
+    assert (edges[8] is first) == (p < 0.8)
+    if p >= 0.8:
+        err = se2.between(se2.between(truth[8], truth[9]), edges[8].estimate)
+        assert abs(err[2]) < math.radians(1.0)
