@@ -90,3 +90,24 @@ def test_label_refuses_loop_precision_without_curve_before_serving(office_edges,
         f"{model}: keeps no validation precision curve, so --loop-precision "
         "cannot choose a threshold; retrain it or use --loop-threshold"
     )
+
+
+def test_the_loop_bar_is_the_highest_cut_a_loop_must_pass(tmp_path):
+    """``EdgeValidator.loop_bar`` is what a wide sequential retry must reach too: the
+    highest of the checkpoint's threshold, ``--loop-threshold`` and the precision cut."""
+    from vgm_studio.slam.config import ValidationConfig
+    from vgm_studio.slam.validation import EdgeValidator
+
+    curve = PrecisionCurve([0.0, 2.0], [0.5, 1.0], [1.0, 0.0])
+    model = _with_curve(tmp_path / "curve.pt", curve)
+    own = load_checkpoint(model).threshold
+
+    def bar(threshold: float | None, precision: float | None = None) -> float | None:
+        config = ValidationConfig(model=model, loop_threshold=threshold, loop_precision=precision)
+        return EdgeValidator(config, [], None).loop_bar
+
+    assert bar(0.8) == max(own, 0.8)
+    assert bar(None) == own
+    assert bar(0.8, 0.9) == 2.0
+    assert bar(0.0, 0.4) == own
+    assert EdgeValidator(ValidationConfig(validator="none"), [], None).loop_bar is None

@@ -117,7 +117,7 @@ class EdgeValidator:
         if self.model is None:
             return None
         cuts = (self.config.loop_threshold, self.precision_cut)
-        return max(self.model.threshold, *(c for c in cuts if c is not None))
+        return max([self.model.threshold, *(c for c in cuts if c is not None)])
 
 
 def _load(path: Path | None, validator: str) -> Validator:
