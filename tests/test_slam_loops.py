@@ -278,3 +278,33 @@ def test_keyframes_passed_the_other_way_get_their_own_slot_and_take_none_of_the_
         assert all(abs(poses[a, 0] - poses[b, 0]) <= 0.5 for a in mine if a in out_leg)
     same_way_only = FrontEndConfig(loops_per_keyframe=2, turned_loops_per_keyframe=0)
     assert {c.a for c in window_candidates(block, poses, graph, same_way_only)} <= set(out_leg)
+
+
+def test_a_rival_group_must_hold_together_too():
+    """CSAIL keyframes 320–325: two lone wrong place loops, their targets far apart across a
+    lost stretch, agreed in the cycle test only because the chain between them could bend
+    either way. Counted as a rival group, they took the two right loops out with them; a
+    rival counts only loops that support one another, as a surprise's support does."""
+    truth = ring()
+    wide = chain(truth, LOOP_COV * 25)
+    lost = np.diag([0.03**2, 0.03**2, math.radians(2.0) ** 2])
+    drift = chain(truth, np.array([lost if i <= 20 else STEP_COV for i in range(1, len(truth))]))
+    estimate = truth.copy()
+    estimate[60:, :2] += 1.5
+    config = ConsistencyConfig(min_support=1, support_sigma=0.5)
+
+    def place(a: int, b: int, off: float = 0.0) -> Loop:
+        z = se2.compose(se2.between(truth[a], truth[b]), [off, 0.0, 0.0])
+        return Loop(a, b, z, LOOP_COV, place=True)
+
+    right = [place(30, 90), place(32, 92), place(34, 94)]
+    wrong = [place(2, 91, off=-9.0), place(20, 93, off=-9.0)]  # doors along
+    flags = consistent([*right, *wrong], estimate, wide, config, drift=drift)
+    assert flags[:3].all() and not flags[3:].any(), flags
+    # Two wrong loops that do hold together (a run matched six keyframes along) are a
+    # rival: neither story is taken.
+    close = [
+        Loop(a + 6, a + 61, se2.between(truth[a], truth[a + 61]), LOOP_COV, place=True)
+        for a in (30, 32)
+    ]
+    assert not consistent([*right, *close], estimate, wide, config, drift=drift).any()
