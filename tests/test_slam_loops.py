@@ -196,7 +196,7 @@ def test_a_loop_that_moves_the_map_past_the_drift_needs_a_group_that_agrees():
     assert consistent(loops[:1], estimate, wide, no_support, drift=drift)[0]
     # A loop the drift explains needs no support, unless place recognition proposed it.
     assert consistent(loops[:1], truth, wide, config, drift=drift)[0]
-    place = [Loop(x.a, x.b, x.measurement, x.covariance, place=True) for x in loops]
+    place = [Loop(x.a, x.b, x.measurement, x.covariance, surprise=True) for x in loops]
     assert not consistent(place[:1], truth, wide, config, drift=drift)[0]
     assert consistent(place[:3], truth, wide, config, drift=drift).all()
 
@@ -213,7 +213,7 @@ def test_two_groups_of_surprises_that_tell_two_stories_are_both_left_out():
     config = ConsistencyConfig(min_support=2)
 
     def place(a: int, claimed: int) -> Loop:
-        return Loop(claimed, a + 90, se2.between(truth[a], truth[a + 90]), LOOP_COV, place=True)
+        return Loop(claimed, a + 90, se2.between(truth[a], truth[a + 90]), LOOP_COV, surprise=True)
 
     right = [place(a, a) for a in range(0, 14, 2)]  # seven
     alias = [place(a, a + 6) for a in (1, 3, 5)]  # three, one period along
@@ -243,7 +243,7 @@ def test_support_counts_only_loops_whose_ends_the_drift_holds_close():
 
     def place(a: int, b: int, off: float = 0.0) -> Loop:
         z = se2.compose(se2.between(truth[a], truth[b]), [off, 0.0, 0.0])
-        return Loop(a, b, z, LOOP_COV, place=True)
+        return Loop(a, b, z, LOOP_COV, surprise=True)
 
     right = [place(0, 90), place(2, 92)]
     alias = place(20, 94, off=3.0)  # a door along, across the stretch the odometry lost
@@ -295,7 +295,7 @@ def test_a_rival_group_must_hold_together_too():
 
     def place(a: int, b: int, off: float = 0.0) -> Loop:
         z = se2.compose(se2.between(truth[a], truth[b]), [off, 0.0, 0.0])
-        return Loop(a, b, z, LOOP_COV, place=True)
+        return Loop(a, b, z, LOOP_COV, surprise=True)
 
     right = [place(30, 90), place(32, 92), place(34, 94)]
     wrong = [place(2, 91, off=-9.0), place(20, 93, off=-9.0)]  # doors along
@@ -304,7 +304,7 @@ def test_a_rival_group_must_hold_together_too():
     # Two wrong loops that do hold together (a run matched six keyframes along) are a
     # rival: neither story is taken.
     close = [
-        Loop(a + 6, a + 61, se2.between(truth[a], truth[a + 61]), LOOP_COV, place=True)
+        Loop(a + 6, a + 61, se2.between(truth[a], truth[a + 61]), LOOP_COV, surprise=True)
         for a in (30, 32)
     ]
     assert not consistent([*right, *close], estimate, wide, config, drift=drift).any()

@@ -177,6 +177,9 @@ def _verdict(edge: SlamEdge) -> str:
     verdict = "kept" if edge.kept else "rejected"
     p = "n/a" if np.isnan(edge.p_success) else f"{edge.p_success:.3f}"
     validator = "kept" if edge.validated else "rejected"
+    if not np.isnan(edge.overlap):
+        # A turned loop judged by its local maps, the network having rejected it.
+        validator += f" on overlap {edge.overlap:.2f}"
     return (
         f"**{verdict}** {edge.kind} edge, keyframes {edge.a} → {edge.b}, source {edge.source}"
         f"{' (injected false loop)' if edge.injected else ''}\n\n"

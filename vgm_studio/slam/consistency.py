@@ -48,8 +48,9 @@ class Loop:
     b: int
     measurement: NDArray[np.float64]
     covariance: NDArray[np.float64]
-    place: bool = False
-    """Proposed by place recognition, which the estimate never backed."""
+    surprise: bool = False
+    """Needs support whatever the estimate says: proposed by place recognition, which never
+    read the estimate, or kept on the overlap of local maps rather than by the validator."""
 
 
 def consistent(
@@ -118,7 +119,7 @@ def _unsupported(
     surprises = {
         i
         for i in members
-        if loops[i].place or _fits_estimate(loops[i], poses, rel[loops[i].a]) > gate
+        if loops[i].surprise or _fits_estimate(loops[i], poses, rel[loops[i].a]) > gate
     }
     if not surprises:
         return set()

@@ -38,6 +38,9 @@ class SlamEdge:
         consistency: The group-consistency check's decision on a loop the validator kept,
             and ``rejected`` on a sequential edge the odometry check of a match that slid
             outside its window took out; else ``not-checked``.
+        overlap: Turned loops the validator's network rejected: the share of b's trail that
+            lies on a's submap at the estimate (``FrontEndConfig.turned_overlap``); NaN
+            where not measured.
     """
 
     kind: SlamEdgeKind
@@ -51,6 +54,7 @@ class SlamEdge:
     source: EdgeSource = "odometry"
     validated: bool = True
     consistency: Consistency = "not-checked"
+    overlap: float = math.nan
 
     @property
     def estimate(self) -> NDArray[np.float64]:

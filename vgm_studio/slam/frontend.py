@@ -37,6 +37,7 @@ from vgm_studio.slam.consistency import Loop, consistent
 from vgm_studio.slam.edges import SlamEdge, SlamEdgeKind, Validate
 from vgm_studio.slam.loop_search import Candidate, place_candidates, trail, window_candidates
 from vgm_studio.slam.sequential import SequentialMatcher
+from vgm_studio.slam.turned import is_turned, trail_overlap
 from vgm_studio.slam.uncertainty import UncertaintyGraph
 
 _T = TypeVar("_T")
@@ -261,6 +262,7 @@ class FrontEnd:
         for e in edges:
             # A failed match returns its guess: no measurement, whatever a validator says.
             e.kept = e.validated = e.kept and e.match.covariance is not None
+        self._judge_turned(edges, poses)
         self._check_consistency([e for e in edges if e.kept], poses)
         kept = [e for e in edges if e.kept]
         for e in kept:
@@ -272,6 +274,21 @@ class FrontEnd:
                 self._trails.add(b, trails[b])
         if kept:
             self.estimate.update(extra_iterations=2)
+
+    def _judge_turned(self, edges: list[SlamEdge], poses: NDArray[np.float64]) -> None:
+        """Turned loops the network rejected, kept where the local maps overlap
+        (``FrontEndConfig.turned_overlap``, ``slam.turned``); the consistency check then asks
+        them for support like place loops."""
+        bar, cfg = self.config.turned_overlap, self.config
+        if bar is None or self.loop_bar is None:
+            return
+        for e in edges:
+            if e.kept or e.match.covariance is None or not is_turned(e, cfg.loop_max_angle_deg):
+                continue
+            submap = self._submap(e.a, e.b)
+            match = self.loop_matcher.config.match
+            e.overlap = trail_overlap(e, submap, self.scans, poses, cfg.submap_keyframes, match)
+            e.kept = e.validated = e.overlap >= bar
 
     def _scan(self, k: int) -> NDArray[np.float64]:
         return self.scans[k].points()
@@ -346,7 +363,13 @@ class FrontEnd:
         if not self.consistency.enabled or not loops:
             return
         checked = [
-            Loop(e.a, e.b, e.estimate, graph_edge(e, self.graph).covariance, e.source == "place")
+            Loop(
+                e.a,
+                e.b,
+                e.estimate,
+                graph_edge(e, self.graph).covariance,
+                surprise=e.source == "place" or not math.isnan(e.overlap),
+            )
             for e in loops
         ]
         flags = consistent(

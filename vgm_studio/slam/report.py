@@ -165,6 +165,7 @@ def edge_json(edge: SlamEdge) -> dict[str, Any]:
         "validator": "kept" if edge.validated else "rejected",
         "p_success": edge.p_success,
         "consistency": edge.consistency,
+        "overlap": edge.overlap,
         "kept": edge.kept,
         "estimate": [float(v) for v in edge.estimate],
     }
