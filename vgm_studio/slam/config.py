@@ -100,7 +100,7 @@ class FrontEndConfig:
             than ``loop_max_angle_deg`` from it: a corridor driven back the other way shares
             its side walls, and the submap around the target saw what lies behind the robot
             (CSAIL: most revisits are 90–170° turned).
-        turned_overlap: A loop turned further than ``loop_max_angle_deg`` that the
+        turned_overlap: A window loop turned further than ``loop_max_angle_deg`` that the
             validator rejected is kept where at least this share of b's trail (b and its
             last ``submap_keyframes`` keyframes, placed by the estimate) lies on a's submap
             at the loop's estimate; it then needs support in the consistency check like a

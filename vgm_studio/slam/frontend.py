@@ -276,14 +276,22 @@ class FrontEnd:
             self.estimate.update(extra_iterations=2)
 
     def _judge_turned(self, edges: list[SlamEdge], poses: NDArray[np.float64]) -> None:
-        """Turned loops the network rejected, kept where the local maps overlap
+        """Turned window loops the network rejected, kept where the local maps overlap
         (``FrontEndConfig.turned_overlap``, ``slam.turned``); the consistency check then asks
-        them for support like place loops."""
+        them for support like place loops.
+
+        Window loops only: the window is where the estimate says b may be. A place loop
+        comes from looks alone, and a corridor seen from both ends looks like any other
+        stretch of it: on the infinite corridor 33 of the 48 turned place loops that
+        overlapped were 2 m or more off (median 15 m), against 1 of 279 window loops.
+        """
         bar, cfg = self.config.turned_overlap, self.config
         if bar is None or self.loop_bar is None:
             return
         for e in edges:
-            if e.kept or e.match.covariance is None or not is_turned(e, cfg.loop_max_angle_deg):
+            if e.kept or e.source != "window" or e.match.covariance is None:
+                continue
+            if not is_turned(e, cfg.loop_max_angle_deg):
                 continue
             submap = self._submap(e.a, e.b)
             match = self.loop_matcher.config.match
