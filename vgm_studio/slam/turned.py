@@ -8,7 +8,10 @@ corrected poses). The places themselves do overlap: the submap around the target
 the keyframes near it saw, and the trail of keyframes that led to the later one holds what
 it saw on the way. The share of the trail's points that lie on the submap at the loop's
 estimate (within the refinement's inlier distance) tells right from wrong turned loops with
-an AUC of 0.94–0.97 on FHW, CSAIL and Belgioioso.
+an AUC of 0.94–0.97 on FHW, CSAIL and Belgioioso (0.88 on the infinite corridor).
+
+The front end asks it only of window loops (``FrontEnd._judge_turned``): along a corridor
+the overlap cannot say which stretch the robot is on, only that it is in the corridor.
 """
 
 from __future__ import annotations
