@@ -289,7 +289,8 @@ class FrontEnd:
         if bar is None or self.loop_bar is None:
             return
         for e in edges:
-            if e.kept or e.source != "window" or e.match.covariance is None:
+            # Injected false loops stand for wrong window loops: they face the rule too.
+            if e.kept or e.source not in ("window", "injected") or e.match.covariance is None:
                 continue
             if not is_turned(e, cfg.loop_max_angle_deg):
                 continue
