@@ -175,6 +175,8 @@ def _finite(value: Any) -> Any:
     # JSON has no NaN: a figure that could not be measured is null.
     if isinstance(value, dict):
         return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite(v) for v in value]
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value
