@@ -104,12 +104,13 @@ class FrontEndConfig:
             validator rejected is kept where at least this share of b's trail (b and its
             last ``submap_keyframes`` keyframes, placed by the estimate) lies on a's submap
             at the loop's estimate; it then needs support in the consistency check like a
-            place loop (None: off; only with a model validator). Two 180° scans of a
-            corridor driven both ways share little more than its side walls, so the
-            network, which judges the two scans, cannot tell a right turned loop from a
-            wrong one (ROC AUC 0.64–0.70 on FHW's and CSAIL's turned loops), while the two
-            local maps overlap where the loop is right (AUC 0.94–0.97 on FHW, CSAIL and
-            Belgioioso).
+            place loop (None: off; only with a model validator, whatever cut the network's
+            p faced: ``loop_threshold`` and ``loop_precision`` are cuts on that p, to which
+            the network here is blind). Two 180° scans of a corridor driven both ways
+            share little more than its side walls, so the network, which judges the two
+            scans, cannot tell a right turned loop from a wrong one (ROC AUC 0.64–0.70 on
+            FHW's and CSAIL's turned loops), while the two local maps overlap where the
+            loop is right (AUC 0.94–0.97 on FHW, CSAIL and Belgioioso).
         block: Keyframes added between two updates of the running estimate: the validator
             and the incremental solver work on whole blocks.
         false_loops: Deliberately wrong loop closures to inject (robustness tests in the style
