@@ -285,9 +285,10 @@ class FrontEnd:
         stretch of it: on the infinite corridor 33 of the 48 turned place loops that
         overlapped were 2 m or more off (median 15 m), against 1 of 279 window loops.
         """
-        bar, cfg = self.config.turned_overlap, self.config
-        if bar is None or self.loop_bar is None:
+        cfg = self.config
+        if cfg.turned_overlap is None or self.loop_bar is None:
             return
+        match = self.loop_matcher.config.match
         for e in edges:
             # Injected false loops stand for wrong window loops: they face the rule too.
             if e.kept or e.source not in ("window", "injected") or e.match.covariance is None:
@@ -295,9 +296,8 @@ class FrontEnd:
             if not is_turned(e, cfg.loop_max_angle_deg):
                 continue
             submap = self._submap(e.a, e.b)
-            match = self.loop_matcher.config.match
             e.overlap = trail_overlap(e, submap, self.scans, poses, cfg.submap_keyframes, match)
-            e.kept = e.validated = e.overlap >= bar
+            e.kept = e.validated = e.overlap >= cfg.turned_overlap
 
     def _scan(self, k: int) -> NDArray[np.float64]:
         return self.scans[k].points()

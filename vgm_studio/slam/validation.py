@@ -93,12 +93,10 @@ class EdgeValidator:
                 for e in edges
             ]
             p = self.model.predict_samples(samples, self.config.batch_size, self.look)
-            keep = self.model.decide(p)
+            bar = self.loop_bar
+            assert bar is not None  # a model gives one
             loop = np.array([e.kind == "loop" for e in edges])
-            if self.config.loop_threshold is not None:
-                keep &= ~loop | (p >= self.config.loop_threshold)
-            if self.precision_cut is not None:
-                keep &= ~loop | (p >= self.precision_cut)
+            keep = self.model.decide(p) & (~loop | (p >= bar))
             for e, pe, k in zip(edges, p, keep, strict=True):
                 e.p_success, e.kept = float(pe), bool(k)
         # The validator's own decision; only the consistency check (loops) may drop ``kept``
