@@ -4,6 +4,7 @@ relative uncertainty, the window search and the group-consistency check."""
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 import pytest
@@ -228,22 +229,34 @@ def test_two_groups_of_surprises_that_tell_two_stories_are_both_left_out():
     assert consistent(right[:3] + alias[:2], estimate, wide, config, drift=drift)[:3].all()
 
 
-def test_support_counts_only_loops_whose_ends_the_drift_holds_close():
-    """CSAIL: an alias 10.7 m off joined two right loops whose targets lay 90 keyframes from
-    its own, across steps where the odometry was lost. The cycle test passed because that
-    chain could bend either way; it says nothing, so such a loop is no support."""
+def _lost_ring() -> tuple[np.ndarray, UncertaintyGraph, UncertaintyGraph, np.ndarray]:
+    """A ring whose odometry was lost over its first 20 steps: the truth, the graph's wide
+    view, the drift's view (wide over the lost stretch) and an estimate that puts keyframes
+    from 60 on 1.5 m off."""
     truth = ring()
     wide = chain(truth, LOOP_COV * 25)
     lost = np.diag([0.03**2, 0.03**2, math.radians(2.0) ** 2])
     drift = chain(truth, np.array([lost if i <= 20 else STEP_COV for i in range(1, len(truth))]))
-    assert drift.relative([0], len(truth))[0].position_var[20] > 0.5**2
     estimate = truth.copy()
     estimate[60:, :2] += 1.5
+    return truth, wide, drift, estimate
+
+
+def _surprise(truth: np.ndarray, a: int, b: int, off: float = 0.0) -> Loop:
+    """A place loop a → b that claims b lies ``off`` metres further along its heading."""
+    z = se2.compose(se2.between(truth[a], truth[b]), [off, 0.0, 0.0])
+    return Loop(a, b, z, LOOP_COV, surprise=True)
+
+
+def test_support_counts_only_loops_whose_ends_the_drift_holds_close():
+    """CSAIL: an alias 10.7 m off joined two right loops whose targets lay 90 keyframes from
+    its own, across steps where the odometry was lost. The cycle test passed because that
+    chain could bend either way; it says nothing, so such a loop is no support."""
+    truth, wide, drift, estimate = _lost_ring()
+    assert drift.relative([0], len(truth))[0].position_var[20] > 0.5**2
     config = ConsistencyConfig(min_support=1, support_sigma=0.5)
 
-    def place(a: int, b: int, off: float = 0.0) -> Loop:
-        z = se2.compose(se2.between(truth[a], truth[b]), [off, 0.0, 0.0])
-        return Loop(a, b, z, LOOP_COV, surprise=True)
+    place = partial(_surprise, truth)
 
     right = [place(0, 90), place(2, 92)]
     alias = place(20, 94, off=3.0)  # a door along, across the stretch the odometry lost
@@ -285,17 +298,10 @@ def test_a_rival_group_must_hold_together_too():
     lost stretch, agreed in the cycle test only because the chain between them could bend
     either way. Counted as a rival group, they took the two right loops out with them; a
     rival counts only loops that support one another, as a surprise's support does."""
-    truth = ring()
-    wide = chain(truth, LOOP_COV * 25)
-    lost = np.diag([0.03**2, 0.03**2, math.radians(2.0) ** 2])
-    drift = chain(truth, np.array([lost if i <= 20 else STEP_COV for i in range(1, len(truth))]))
-    estimate = truth.copy()
-    estimate[60:, :2] += 1.5
+    truth, wide, drift, estimate = _lost_ring()
     config = ConsistencyConfig(min_support=1, support_sigma=0.5)
 
-    def place(a: int, b: int, off: float = 0.0) -> Loop:
-        z = se2.compose(se2.between(truth[a], truth[b]), [off, 0.0, 0.0])
-        return Loop(a, b, z, LOOP_COV, surprise=True)
+    place = partial(_surprise, truth)
 
     right = [place(30, 90), place(32, 92), place(34, 94)]
     wrong = [place(2, 91, off=-9.0), place(20, 93, off=-9.0)]  # doors along
