@@ -50,13 +50,17 @@ class Scan:
     def angles(self) -> NDArray[np.float64]:
         return self.angle_min + self.angle_increment * np.arange(self.num_beams, dtype=np.float64)
 
-    def points(self) -> NDArray[np.float64]:
-        """Returns the (N, 2) valid end points in the base frame (the laser's without a mount)."""
+    def valid(self) -> NDArray[np.bool_]:
+        """Which beams returned a point: in range and finite."""
         # Compare in float32, as ranges are stored: a no-return written as exactly max_range
         # must not come back as a point 1e-7 m short of it.
         r32 = self.ranges
-        keep = (r32 >= MIN_VALID_RANGE) & (r32 < np.float32(self.max_range)) & np.isfinite(r32)
-        r, a = r32[keep].astype(np.float64), self.angles()[keep]
+        return (r32 >= MIN_VALID_RANGE) & (r32 < np.float32(self.max_range)) & np.isfinite(r32)
+
+    def points(self) -> NDArray[np.float64]:
+        """Returns the (N, 2) valid end points in the base frame (the laser's without a mount)."""
+        keep = self.valid()
+        r, a = self.ranges[keep].astype(np.float64), self.angles()[keep]
         points = np.stack([r * np.cos(a), r * np.sin(a)], axis=1).astype(np.float64)
         return points if self.mount is None else self.mount.place(points)
 

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.matching.refinement import Target
+from vgm_studio.matching.surface import stretch_points
 
 # Highest value of the grid: a cell holding an end point.
 PEAK = 255
@@ -78,6 +79,7 @@ class Submap:
         sigma: float | None = None,
         depth: int = 7,
         normal_neighbors: int = 6,
+        stretches: NDArray[np.float64] | None = None,
     ) -> Submap:
         """Builds the grid and its max levels from points in the submap frame.
 
@@ -89,6 +91,8 @@ class Submap:
             depth: Highest level to precompute; branch and bound over windows wider than
                 2^depth cells starts from several top blocks.
             normal_neighbors: Neighbours used to fit local lines for the refinement.
+            stretches: (M, 2) more points the grid is drawn from, which the refinement does
+                not match against: the surfaces between a scan's end points (``surface.py``).
 
         Raises:
             ValueError: No points, a resolution ≤ 0 or a negative depth.
@@ -96,12 +100,15 @@ class Submap:
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
         if len(pts) == 0:
             raise ValueError("a submap needs at least one point")
+        grid_pts = pts
+        if stretches is not None:
+            grid_pts = np.concatenate([pts, np.asarray(stretches, np.float64).reshape(-1, 2)])
         if resolution <= 0 or depth < 0:
             raise ValueError("resolution must be positive and depth non-negative")
         sig = float(sigma) if sigma is not None else resolution
         pad = 2**depth + math.ceil(3.0 * sig / resolution) + 1
-        lo = np.floor(pts.min(axis=0) / resolution) * resolution - pad * resolution
-        cells = np.floor((pts - lo) / resolution).astype(np.intp)
+        lo = np.floor(grid_pts.min(axis=0) / resolution) * resolution - pad * resolution
+        cells = np.floor((grid_pts - lo) / resolution).astype(np.intp)
         shape = (int(cells[:, 0].max()) + pad + 1, int(cells[:, 1].max()) + pad + 1)
         base = _likelihood(cells, shape, sig / resolution)
         return cls(
@@ -123,7 +130,9 @@ class Submap:
         max_range: float = 30.0,
         **kw: float | int | None,
     ) -> Submap:
-        """Places several scans in one frame and builds their grid.
+        """Places several scans in one frame and builds their grid from the surfaces they saw
+        (``surface.py``): end points, and the stretches between neighbouring beams on one
+        surface.
 
         Args:
             scans: The scans (keyframes around the loop target, say).
@@ -138,13 +147,16 @@ class Submap:
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
         if len(poses) != len(scans):
             raise ValueError(f"{len(scans)} scans but {len(poses)} poses")
-        parts = []
+        parts, stretches = [], []
         for scan, pose in zip(scans, poses, strict=True):
             pts = scan.points()
             pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= max_range]
             parts.append(se2.transform_points(pose, pts))
+            between = stretch_points(scan, max_range, resolution / 2)
+            stretches.append(se2.transform_points(pose, between))
         merged = np.concatenate(parts) if parts else np.empty((0, 2))
-        return cls.from_points(merged, resolution, **kw)  # type: ignore[arg-type]
+        drawn = np.concatenate(stretches) if stretches else np.empty((0, 2))
+        return cls.from_points(merged, resolution, stretches=drawn, **kw)  # type: ignore[arg-type]
 
     def target(self) -> Target:
         """The points prepared for point-to-line refinement (k-d tree, normals), built once."""

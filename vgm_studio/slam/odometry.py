@@ -83,7 +83,7 @@ def scan_odometry(
     pipeline = KissICP(kiss_config(config))
     wheels = all(s.odometry is not None for s in scans)
     poses = np.zeros((len(scans), 3))
-    previous: NDArray[np.float64] | None = None
+    previous: Scan | None = None
     bar = tqdm(scans, desc="odometry", unit="scan", disable=None if progress else True)
     for i, scan in enumerate(bar):
         if wheels and i > 0:
@@ -95,7 +95,7 @@ def scan_odometry(
             pipeline.register_frame(as_3d(pts), np.zeros(len(pts)))
             if not wheels and previous is not None and math.isfinite(recovery.gain):
                 _recover(pipeline, previous, pts, poses[i - 1], config, recovery)
-            previous = pts
+            previous = scan
         else:
             # Nothing to register: carry the prediction.
             pipeline.last_pose = pipeline.last_pose @ pipeline.last_delta
@@ -105,7 +105,7 @@ def scan_odometry(
 
 def _recover(
     pipeline: KissICP,
-    previous: NDArray[np.float64],
+    previous: Scan,
     pts: NDArray[np.float64],
     last: NDArray[np.float64],
     config: MatchConfig,
@@ -114,7 +114,12 @@ def _recover(
     """Searches kiss-icp's last step again over a wide window, and restarts kiss-icp's local
     map from the two scans if the search found a clearly better step."""
     step = se2.between(last, se2.from_matrix(pipeline.last_pose))
-    submap = Submap.from_points(previous, normal_neighbors=config.normal_neighbors)
+    submap = Submap.from_scans(
+        [previous],
+        np.zeros((1, 3)),
+        max_range=config.max_range,
+        normal_neighbors=config.normal_neighbors,
+    )
     # Near the sensor a laser puts several points in a cell: one per two cells scores alike
     # for a third less time (the refinement below uses them all).
     coarse = thin_points(pts, 2 * submap.resolution)
@@ -135,7 +140,7 @@ def _recover(
     pose = pose_to_4x4(se2.compose(last, found))
     # kiss-icp's map holds this scan where it was lost: start it again from the two scans.
     pipeline.local_map.clear()
-    pipeline.local_map.update(pipeline.voxelize(as_3d(previous))[1], pose_to_4x4(last))
+    pipeline.local_map.update(pipeline.voxelize(as_3d(submap.points))[1], pose_to_4x4(last))
     pipeline.local_map.update(pipeline.voxelize(as_3d(pts))[1], pose)
     pipeline.last_delta = pose_to_4x4(found)
     pipeline.last_pose = pose

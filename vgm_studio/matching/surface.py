@@ -1,0 +1,78 @@
+"""The surfaces a scan saw: its end points, and the stretch between neighbouring beams that
+hit one surface.
+
+Why the correlative grid needs them: a grid of end points alone is dense near the sensor and
+sparse far from it, most of all along a wall seen at a grazing angle (one beam a degree, a
+wall 1 m to the side: 6 m ahead its points lie 0.6 m apart). Scored on such a grid, a scan
+fits best where its own dense near points fall on the target's dense near points. Along a
+corridor that is short of the true step, and the shorter the further the robot moved between
+scans (Örebro, scans 2–4 m apart without wheel odometry: 2.1 m true steps scored 0.52–0.53 at
+the truth against 0.54–0.56 at 0.5 m; with the stretches drawn, 0.74–0.78 against 0.59–0.66).
+Drawn in, the walls are continuous, and a pose scores by how much of the scan lies on the
+target's surfaces, not by how densely the target sampled them.
+
+Which neighbours saw one surface: the adaptive breakpoint detector (G. A. Borges and M.-J.
+Aldon, "Line extraction in 2D range images for mobile robotics", J. Intelligent and Robotic
+Systems 40, 2004): on a surface seen at more than λ from grazing, neighbouring end points lie
+at most r·sin Δφ / sin(λ − Δφ) + 3σ_r apart; further apart, the beams passed an edge between
+them, and the gap is left open.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vgm_studio.datasets.scans import Scan
+
+# Borges & Aldon's values: surfaces seen within 10° of grazing are left as points, and a
+# laser's range noise of 1 cm.
+GRAZING_DEG = 10.0
+RANGE_SIGMA = 0.01
+
+
+def stretch_points(
+    scan: Scan,
+    max_range: float,
+    spacing: float,
+    grazing_deg: float = GRAZING_DEG,
+) -> NDArray[np.float64]:
+    """Points every ``spacing`` metres or closer between neighbouring beams within
+    ``max_range`` that hit one surface, in the scan's base frame; the end points themselves
+    are not among them.
+
+    Args:
+        scan: The scan.
+        max_range: Readings farther than this are left out, with the stretches to them.
+        spacing: Greatest distance between the points drawn along a stretch, metres (half a
+            grid cell marks every cell a stretch crosses).
+        grazing_deg: λ: surfaces seen within this angle of grazing are not joined.
+
+    Returns:
+        (N, 2) points, in beam order.
+    """
+    keep = scan.valid()
+    ranges = scan.ranges.astype(np.float64)
+    keep &= ranges <= max_range
+    angles = scan.angles()
+    ends = np.stack([ranges * np.cos(angles), ranges * np.sin(angles)], axis=1)
+    step = abs(scan.angle_increment)
+    lam = math.radians(grazing_deg)
+    gap = np.hypot(*(ends[1:] - ends[:-1]).T)
+    if step <= 0 or step >= lam:
+        joined = np.zeros(len(gap), dtype=bool)
+    else:
+        near = np.minimum(ranges[:-1], ranges[1:])
+        widest = near * math.sin(step) / math.sin(lam - step) + 3.0 * RANGE_SIGMA
+        joined = keep[:-1] & keep[1:] & (gap <= widest) & (gap > spacing)
+    first = np.flatnonzero(joined)
+    counts = np.ceil(gap[first] / spacing).astype(np.intp) - 1
+    which = np.repeat(first, counts)
+    # Fractions 1/n … (n-1)/n along each stretch, n = counts + 1.
+    starts = np.cumsum(counts) - counts
+    k = np.arange(len(which)) - np.repeat(starts, counts) + 1
+    t = (k / np.repeat(counts + 1, counts))[:, None]
+    between = ends[which] + t * (ends[which + 1] - ends[which])
+    return between if scan.mount is None else scan.mount.place(between)
