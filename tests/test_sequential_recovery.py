@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -18,15 +19,17 @@ import pytest
 
 from vgm_studio.core import se2
 from vgm_studio.datasets import open_log
+from vgm_studio.datasets.scans import Scan
 from vgm_studio.graph.config import GraphConfig
 from vgm_studio.matching.candidates import select_keyframes
 from vgm_studio.matching.correlative import CorrelativeConfig, LoopMatcher
-from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.matching.matcher import MatchResult, ScanMatcher
+from vgm_studio.simulation.raycast import beam_angles, cast
 from vgm_studio.simulation.simulate import SimConfig, simulate
 from vgm_studio.slam.config import FrontEndConfig, ValidationConfig
 from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.frontend import FrontEnd
-from vgm_studio.slam.odometry import Recovery, scan_odometry
+from vgm_studio.slam.odometry import Judge, Recovery, scan_odometry
 from vgm_studio.slam.sequential import SequentialMatcher
 from vgm_studio.slam.validation import EdgeValidator
 
@@ -202,6 +205,77 @@ def test_wheel_less_odometry_over_sparse_scans_follows_the_robot(tmp_path):
     assert len(scans) > 40
     assert wrong_steps(Recovery()) < 0.05
     assert wrong_steps(Recovery(gain=math.inf)) > 0.5
+
+
+def test_wheel_less_odometry_follows_the_robot_along_walls_seen_grazing(tmp_path):
+    """An office's corridors at a metre a scan: scored on end points alone, a step fitted
+    best where the scan's dense near points fell on the last scan's, short of the truth
+    (11% of the steps wrong); on the walls drawn whole, none."""
+    path = simulate(
+        SimConfig(preset="office", seed=4, num_beams=181, scan_spacing=1.0, laps=0.5), tmp_path
+    )
+    scans = [dataclasses.replace(s, odometry=None) for s in open_log(path).scans]
+    truth = np.array([s.reference for s in scans])
+    odo = scan_odometry(scans, progress=False)
+    err = se2.between(se2.between(truth[:-1], truth[1:]), se2.between(odo[:-1], odo[1:]))
+    bad = (np.hypot(err[:, 0], err[:, 1]) > 0.1) | (np.abs(err[:, 2]) > math.radians(2.0))
+    assert len(scans) > 60
+    assert bad.mean() < 0.05
+
+
+def _hexagon_pair(step: float, turn_deg: float) -> list[Scan]:
+    """Two scans in a hexagonal room (5 m to its corners): the first at (-step/2, 0) facing
+    +x, the second at (step/2, 0) turned by ``turn_deg``. Turned by 60° about the room's
+    centre, the room is itself, so every pose has look-alikes."""
+    corners = [
+        (5 * math.cos(math.radians(60 * k + 30)), 5 * math.sin(math.radians(60 * k + 30)))
+        for k in range(7)
+    ]
+    walls = np.array([[*corners[k], *corners[k + 1]] for k in range(6)])
+    amin, inc = beam_angles(181, 180.0)
+    poses = [(-step / 2, 0.0, 0.0), (step / 2, 0.0, math.radians(turn_deg))]
+    return [
+        Scan(
+            i,
+            float(i),
+            cast(p, p[2] + amin + inc * np.arange(181), walls, 30.0).astype(np.float32),
+            amin,
+            inc,
+            30.0,
+        )
+        for i, p in enumerate(poses)
+    ]
+
+
+def test_a_judge_chooses_among_headings_the_score_cannot_tell_apart():
+    """kiss-icp loses a step turned 85°; the searches of the sectors of headings find two
+    look-alikes of the room scoring within the recovery's gain of each other. The judge (in a
+    SLAM run, the validator) is asked about both, and the step taken is the one it prefers;
+    without a judge, the higher score."""
+    scans = _hexagon_pair(2.0, 85.0)
+    offered: list[list[MatchResult]] = []
+
+    def prefer(k: int | None) -> Judge:
+        def judge(first: Scan, second: Scan, matches: Sequence[MatchResult]) -> np.ndarray:
+            assert (first, second) == (scans[0], scans[1])
+            offered.append(list(matches))
+            return np.eye(len(matches))[k if k is not None else 0]
+
+        return judge
+
+    scan_odometry(scans, progress=False, judge=prefer(None))
+    assert len(offered) == 1
+    candidates = offered[0]
+    assert len(candidates) >= 2
+    scores = [m.score or 0.0 for m in candidates]
+    assert (1.0 + Recovery().gain) * min(scores) >= max(scores)
+    headings = sorted(float(m.estimate[2]) for m in candidates)
+    assert min(np.diff(headings)) > math.radians(30.0)
+    for k, m in enumerate(candidates):
+        step = scan_odometry(scans, progress=False, judge=prefer(k))[1]
+        assert np.allclose(step, m.estimate, atol=1e-6)
+    best = candidates[int(np.argmax(scores))]
+    assert np.allclose(scan_odometry(scans, progress=False)[1], best.estimate, atol=1e-6)
 
 
 class _AliasingMatcher(LoopMatcher):

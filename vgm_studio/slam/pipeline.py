@@ -19,7 +19,7 @@ from vgm_studio.slam.config import SlamConfig
 from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.frontend import FrontEnd, fallback_edge, graph_edge
 from vgm_studio.slam.odometry import scan_odometry
-from vgm_studio.slam.validation import EdgeValidator
+from vgm_studio.slam.validation import EdgeValidator, pair_judge
 
 MIN_POINTS = 10
 
@@ -141,7 +141,7 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
             "SLAM needs two or more",
         )
     t = time.perf_counter()
-    odometry = scan_odometry(log.scans, progress=progress)
+    odometry = scan_odometry(log.scans, progress=progress, judge=pair_judge(config.validation))
     seconds["odometry"] = time.perf_counter() - t
     fe = config.front_end
     if config.validation.validator == "none":

@@ -17,11 +17,13 @@ from numpy.typing import NDArray
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.errors import InputError
+from vgm_studio.matching.matcher import MatchResult
 from vgm_studio.matching.reference_labels import reference_label
 from vgm_studio.model.features import sample_from_scans
 from vgm_studio.model.registry import VALIDATOR_MODELS
 from vgm_studio.slam.config import ValidationConfig
 from vgm_studio.slam.edges import SlamEdge
+from vgm_studio.slam.odometry import Judge
 
 if TYPE_CHECKING:
     from vgm_studio.model.validator import SecondLook, Validator
@@ -116,6 +118,28 @@ class EdgeValidator:
             return None
         cuts = (self.config.loop_threshold, self.precision_cut)
         return max([self.model.threshold, *(c for c in cuts if c is not None)])
+
+
+def pair_judge(config: ValidationConfig) -> Judge | None:
+    """The model validator as a judge of matches of one scan against the one before it (the
+    wheel-less odometry's candidates, ``slam/odometry.py``); None without a model.
+
+    Raises:
+        InputError: The checkpoint is missing, unreadable or of another model.
+    """
+    if config.validator not in VALIDATOR_MODELS:
+        return None
+    model = _load(config.model, config.validator)
+    from vgm_studio.model.validator import SecondLook  # torch is loaded by now
+
+    look = SecondLook(turns=config.second_look)
+
+    def judge(first: Scan, second: Scan, matches: Sequence[MatchResult]) -> NDArray[np.float64]:
+        a, b = first.points(), second.points()
+        samples = [sample_from_scans(a, b, m.estimate, m.figures()) for m in matches]
+        return np.asarray(model.predict_samples(samples, config.batch_size, look))
+
+    return judge
 
 
 def _load(path: Path | None, validator: str) -> Validator:
