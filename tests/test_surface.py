@@ -69,7 +69,7 @@ def test_a_wall_scores_between_its_end_points_as_it_does_on_them():
     # A wall at 45°, 6 m off: neighbouring end points ~0.15 m apart, three cells.
     scan = _scan([(6.0 * math.sqrt(2) - 10.0, 10.0, 6.0 * math.sqrt(2) + 10.0, -10.0)])
     pts = scan.points()
-    with_stretches = Submap.from_scans([scan], np.zeros((1, 3)))
+    with_stretches = Submap.from_scans([scan], np.zeros((1, 3)), surfaces=True)
     ends_only = Submap.from_points(pts)
     mids = (pts[:-1] + pts[1:]) / 2
     mids = mids[np.hypot(*(pts[1:] - pts[:-1]).T) > 0.1]

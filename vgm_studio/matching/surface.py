@@ -1,15 +1,17 @@
 """The surfaces a scan saw: its end points, and the stretch between neighbouring beams that
 hit one surface.
 
-Why the correlative grid needs them: a grid of end points alone is dense near the sensor and
+Why a correlative search needs them: a grid of end points alone is dense near the sensor and
 sparse far from it, most of all along a wall seen at a grazing angle (one beam a degree, a
 wall 1 m to the side: 6 m ahead its points lie 0.6 m apart). Scored on such a grid, a scan
-fits best where its own dense near points fall on the target's dense near points. Along a
-corridor that is short of the true step, and the shorter the further the robot moved between
-scans (Örebro, scans 2–4 m apart without wheel odometry: 2.1 m true steps scored 0.52–0.53 at
-the truth against 0.54–0.56 at 0.5 m; with the stretches drawn, 0.74–0.78 against 0.59–0.66).
-Drawn in, the walls are continuous, and a pose scores by how much of the scan lies on the
-target's surfaces, not by how densely the target sampled them.
+fits best where its own dense near points fall on the target's dense near points: along a
+corridor, short of the true step, and the shorter the further apart the scans. Örebro, whose
+scans lie 1–4 m apart with no wheel odometry: two 2.0–2.1 m steps scored 0.52–0.53 at the
+truth against 0.54–0.56 a metre and more short of it; drawn in, 0.74–0.78 against 0.59–0.66.
+With the walls whole, a pose scores by how much of the scan lies on the target's surfaces,
+not by how densely the target sampled them. Only the wheel-less odometry's search between
+single scans draws them (``Submap.from_scans(surfaces=True)``; why not the submaps of
+several keyframes: see there).
 
 Which neighbours saw one surface: the adaptive breakpoint detector (G. A. Borges and M.-J.
 Aldon, "Line extraction in 2D range images for mobile robotics", J. Intelligent and Robotic
