@@ -21,7 +21,9 @@ another clearly outscores it, and the validator chooses among them: with little 
 pose turned the wrong way can put as many points on a few walls as the right one does
 (Örebro scan 212: turned −89°, score 0.35, p 0.18; the true −9°, score 0.34, p 0.67). Where
 the scores differ clearly, they decide: on so little overlap the validator errs too (Örebro
-scan 2: the right pose 0.42, p 0.53; one turned −66°, 0.23, p 0.60). What it cannot mend: along a featureless or periodic corridor a step a door further scores
+scan 2: the right pose 0.42, p 0.53; one turned −66°, 0.23, p 0.60).
+
+What it cannot mend: along a featureless or periodic corridor a step a door further scores
 as well as the right one, and the validator cannot tell them apart either.
 """
 
