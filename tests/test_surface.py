@@ -81,3 +81,19 @@ def test_a_wall_scores_between_its_end_points_as_it_does_on_them():
 
     assert values(with_stretches).min() > 0.6
     assert values(ends_only).mean() < 0.6
+
+
+def test_no_returns_are_never_joined(recwarn):
+    # A wall 2 m round the sensor, with beams that saw nothing (inf, NaN, 0) among them.
+    ranges = np.full(181, 2.0, np.float32)
+    ranges[10:20], ranges[30], ranges[40:45] = np.inf, np.nan, 0.0
+    amin, inc = beam_angles(181, 180.0)
+    scan = Scan(0, 0.0, ranges, amin, inc, 30.0)
+    drawn = stretch_points(scan, 30.0, SPACING)
+    assert len(drawn) > 100
+    assert np.allclose(np.hypot(drawn[:, 0], drawn[:, 1]), 2.0, atol=1e-3)
+    # Nothing drawn across the gaps the no-returns leave.
+    angles = np.arctan2(drawn[:, 1], drawn[:, 0])
+    for lo, hi in ((10, 19), (30, 30), (40, 44)):
+        assert not ((angles > amin + (lo - 0.5) * inc) & (angles < amin + (hi + 0.5) * inc)).any()
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]

@@ -56,8 +56,9 @@ def stretch_points(
         (N, 2) points, in beam order.
     """
     keep = scan.valid()
-    ranges = scan.ranges.astype(np.float64)
-    keep &= ranges <= max_range
+    keep &= scan.ranges <= max_range
+    # No-returns (inf, NaN) at the origin: they are never joined, and stay finite.
+    ranges = np.where(keep, scan.ranges, 0.0).astype(np.float64)
     angles = scan.angles()
     ends = np.stack([ranges * np.cos(angles), ranges * np.sin(angles)], axis=1)
     step = abs(scan.angle_increment)
