@@ -143,7 +143,7 @@ def _recover(
 ) -> None:
     """Searches kiss-icp's last step again over a wide window, and restarts kiss-icp's local
     map from the two scans if the search found a clearly better step."""
-    previous = pair[0]
+    previous, current = pair
     step = se2.between(last, se2.from_matrix(pipeline.last_pose))
     submap = Submap.from_scans(
         [previous],
@@ -177,7 +177,7 @@ def _recover(
     matches = [_refined(submap, pts, hit, config) for hit in hits]
     best = max(range(len(hits)), key=lambda i: hits[i].score)
     if judge is not None and len(matches) > 1:
-        best = int(np.argmax(judge(previous, pair[1], matches)))
+        best = int(np.argmax(judge(previous, current, matches)))
     found = matches[best].estimate
     pose = pose_to_4x4(se2.compose(last, found))
     # kiss-icp's map holds this scan where it was lost: start it again from the two scans.
