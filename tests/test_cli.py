@@ -133,3 +133,21 @@ def test_help_lists_commands():
     for name in ("info", "simulate", "candidates", "vgm", "demo"):
         assert name in out
     assert Path(shutil.which("vgm-studio") or "").name in {"vgm-studio", ""}
+
+
+def test_ctrl_c_ends_a_command_with_130_and_a_word(tmp_path, monkeypatch, capsys):
+    """typer turns Ctrl-C into exit code 130, which outside its standalone mode comes back as
+    a value: a run stopped half-way once ended silently with 0, and `slam … && next` went on."""
+    from vgm_studio.services import info as service
+    from vgm_studio.tools import cmd
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(service, "describe", stopped)
+    log = tmp_path / "one.log"
+    log.write_text("FLASER 3 1.0 1.0 1.0 0 0 0 0 0 0 0 host 0\n")
+    with pytest.raises(SystemExit) as stop:
+        cmd.main(["info", str(log)])
+    assert stop.value.code == 130
+    assert capsys.readouterr().err.strip() == "vgm-studio: interrupted"

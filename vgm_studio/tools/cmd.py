@@ -282,11 +282,19 @@ def main(argv: list[str] | None = None) -> None:
 def _run(argv: list[str] | None) -> None:
     command = typer.main.get_command(app)
     try:
-        command.main(args=argv, prog_name=PROG, standalone_mode=False)
+        code = command.main(args=argv, prog_name=PROG, standalone_mode=False)
     except typer.Abort:
         raise KeyboardInterrupt from None
     except typer.TyperException as exc:
         _usage_error(exc)
+        return
+    # Outside standalone mode an exit comes back as its code, not an exception: typer turns
+    # Ctrl-C into exit code 130 so, and a run stopped half-way must not end with 0. Every
+    # command returns None, so an int here is an exit code.
+    if code == 130:
+        raise KeyboardInterrupt
+    if isinstance(code, int) and not isinstance(code, bool) and code != 0:
+        raise SystemExit(code)
 
 
 def _usage_error(exc: Exception) -> None:
