@@ -172,6 +172,20 @@ def test_a_corrected_log_scores_against_its_corrected_poses_however_it_is_read(d
     assert docs["poses-odometry"]["odometry"]["trans_mean"] < docs["auto"]["odometry"]["trans_mean"]
 
 
+def test_odometry_on_a_few_scans_is_not_used_and_not_warned_of(datasets, tmp_path, capsys):
+    """Örebro's log holds raw odometry for 34 of its 237 scans: the run goes without it, says
+    so, and does not warn that the scans disagree with odometry it never used (it once
+    blamed the laser's mount)."""
+    log = datasets / "radish-corrected" / "orebro-corrected.log"
+    out = tmp_path / "orebro.json"
+    cmd.main(["slam", str(log), "--json", str(out)])
+    said = capsys.readouterr()
+    assert "odometry on 34 of 237 scans only" in said.out + said.err
+    assert "disagree" not in said.out + said.err
+    doc = json.loads(out.read_text())
+    assert doc["after"]["trans_mean"] < doc["odometry"]["trans_mean"]
+
+
 def test_scans_between_keyframes_share_both_keyframes_corrections():
     # Odometry that drifts sideways 1 cm per scan over a straight 2 m run; the keyframes
     # (every tenth scan) are put back on the true line.
