@@ -105,7 +105,9 @@ def test_unwritable_outputs_fail_before_any_work(tmp_path):
     existing = tmp_path / "file"
     existing.write_text("")
     line = one_line_error(run("simulate", "--out", existing), 1)
-    assert "is a file, not a folder" in line
+    assert "is a file, not a folder; --out takes a folder" in line
+    line = one_line_error(run("slam", DEMO, "--map-png", existing), 1)
+    assert "is a file, not a folder; --map-png takes a folder" in line
     assert "/proc/sim: cannot write here" in one_line_error(
         run("simulate", "--out", "/proc/sim"), 1
     )

@@ -85,14 +85,18 @@ def writable_file(path: Path) -> None:
     _probe(path.parent, f".{path.name}.", path)
 
 
-def writable_folder(path: Path) -> None:
+def writable_folder(path: Path, option: str = "--out") -> None:
     """Fails now if ``path`` cannot be a folder to write files into.
+
+    Args:
+        path: The folder.
+        option: The option that named it, for the message.
 
     Raises:
         InputError: ``path`` is a file, or cannot be made or written.
     """
     if path.exists() and not path.is_dir():
-        raise InputError(path, "is a file, not a folder; --out takes a folder")
+        raise InputError(path, f"is a file, not a folder; {option} takes a folder")
     _probe(path, ".vgm-studio.", path)
 
 

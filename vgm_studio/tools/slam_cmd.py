@@ -169,7 +169,7 @@ def slam(
         if out is not None:
             writable_file(out)
     if map_png is not None:
-        writable_folder(map_png)
+        writable_folder(map_png, "--map-png")
     config = SlamConfig(
         front_end=FrontEndConfig(
             keyframe_distance=keyframe_distance,
