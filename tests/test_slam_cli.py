@@ -181,6 +181,11 @@ def test_bad_inputs_end_as_one_line(office, tmp_path, capsys):
         ((log, "--relations", log), f"vgm-studio: error: {log}: is not a Freiburg relations file"),
         ((log, "--validator", "score"), "vgm-studio: error: --validator score needs --model"),
         ((tmp_path / "none.log",), f"vgm-studio: error: {tmp_path / 'none.log'}: no such file"),
+        # The model is checked before the log is read (seconds, on a large log).
+        (
+            (tmp_path / "none.log", "--model", tmp_path / "none.pt"),
+            f"vgm-studio: error: {tmp_path / 'none.pt'}: no such model file",
+        ),
     ):
         with pytest.raises(SystemExit) as exit_info:
             run(*args)

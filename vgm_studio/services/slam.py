@@ -53,8 +53,11 @@ def validator_model(validator: str, model: Path | None) -> Path | None:
     """The checkpoint a validator uses: the one given, the bundled one for ``vgmnet``.
 
     Raises:
-        InputError: Another model validator without ``--model``.
+        InputError: Another model validator without ``--model``, or a ``--model`` that is
+            not a file (said before the log is read, not after).
     """
+    if validator in VALIDATOR_MODELS and model is not None and not model.is_file():
+        raise InputError(model, "no such model file" if not model.exists() else "not a file")
     if validator not in VALIDATOR_MODELS or model is not None:
         return model
     if validator != "vgmnet":
