@@ -229,3 +229,24 @@ def test_non_finite_or_negative_ranges_name_the_line(tmp_path, bad, kind):
     assert exc.value.line == 2
     skipped = open_log(path, ReadOptions(skip_bad_lines=True))
     assert len(skipped.scans) == 2 and skipped.skipped_line_numbers == [2]
+
+
+def test_points_are_kept_only_where_asked():
+    """Keyframes keep their points (SLAM asks for them again and again); other scans make them
+    anew each time, so a long log does not hold five times its ranges in points."""
+    import copy
+    import dataclasses
+    import pickle
+
+    from vgm_studio.datasets.scans import Scan
+
+    scan = Scan(0, 0.0, np.array([1.0, 2.0, 3.0], np.float32), 0.0, 0.1, 30.0)
+    assert scan.points() is not scan.points()
+    assert scan.points().flags.writeable
+    kept = dataclasses.replace(scan, keep_points=True)
+    assert kept.points() is kept.points()
+    assert not kept.points().flags.writeable
+    np.testing.assert_array_equal(kept.points(), scan.points())
+    for other in (pickle.loads(pickle.dumps(kept)), copy.deepcopy(kept), dataclasses.replace(kept)):
+        assert not other._points
+        np.testing.assert_array_equal(other.points(), scan.points())

@@ -29,7 +29,7 @@ def compose(a: ArrayLike, b: ArrayLike) -> Pose:
     """Returns a ∘ b: the pose b, given in the frame of a, expressed in a's parent frame."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
-    if a.shape == b.shape == (3,):
+    if a.shape == b.shape == (3,) and math.isfinite(a[2]):
         # One pose each, as the graph search and the cycle checks compose hundreds of
         # thousands of them: floats are 10x faster than numpy's small-array calls.
         ax, ay, at = a.tolist()
@@ -45,7 +45,7 @@ def compose(a: ArrayLike, b: ArrayLike) -> Pose:
 def inverse(a: ArrayLike) -> Pose:
     """Returns a⁻¹."""
     a = np.asarray(a, dtype=np.float64)
-    if a.shape == (3,):
+    if a.shape == (3,) and math.isfinite(a[2]):
         x, y, t = a.tolist()
         c, s = math.cos(t), math.sin(t)
         return np.array([-c * x - s * y, s * x - c * y, _wrap(-t)])

@@ -37,8 +37,11 @@ class Scan:
     reference: NDArray[np.float64] | None = None
     line: int = 0
     mount: LaserMount | None = None
-    # ``points()`` once computed: SLAM asks for a keyframe's points again for every loop
-    # candidate, trail and validation it takes part in (100,000 times on Intel). Not pickled.
+    keep_points: bool = False
+    # ``points()`` once computed, where ``keep_points``: SLAM asks for a keyframe's points
+    # again for every loop candidate, trail and validation it takes part in (100,000 times on
+    # Intel). Only keyframes keep them: points for every scan of a long log would take five
+    # times the memory of its ranges. Not pickled.
     _points: list[NDArray[np.float64]] = field(
         default_factory=list, init=False, repr=False, compare=False
     )
@@ -63,16 +66,18 @@ class Scan:
         return (r32 >= MIN_VALID_RANGE) & (r32 < np.float32(self.max_range)) & np.isfinite(r32)
 
     def points(self) -> NDArray[np.float64]:
-        """Returns the (N, 2) valid end points in the base frame (the laser's without a mount),
-        read-only: they are computed once and shared."""
-        if not self._points:
-            keep = self.valid()
-            r, a = self.ranges[keep].astype(np.float64), self.angles()[keep]
-            points = np.stack([r * np.cos(a), r * np.sin(a)], axis=1).astype(np.float64)
-            placed = points if self.mount is None else self.mount.place(points)
+        """Returns the (N, 2) valid end points in the base frame (the laser's without a mount);
+        read-only where the scan keeps them (``keep_points``), since they are shared."""
+        if self._points:
+            return self._points[0]
+        keep = self.valid()
+        r, a = self.ranges[keep].astype(np.float64), self.angles()[keep]
+        points = np.stack([r * np.cos(a), r * np.sin(a)], axis=1).astype(np.float64)
+        placed = points if self.mount is None else self.mount.place(points)
+        if self.keep_points:
             placed.setflags(write=False)
             self._points.append(placed)
-        return self._points[0]
+        return placed
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)

@@ -49,22 +49,29 @@ def stretch_points(
         scan: The scan.
         max_range: Readings farther than this are left out, with the stretches to them.
         spacing: Greatest distance between the points drawn along a stretch, metres (half a
-            grid cell marks every cell a stretch crosses).
-        grazing_deg: λ: surfaces seen within this angle of grazing are not joined.
+            grid cell marks nearly every cell a stretch crosses; the likelihood's blur covers
+            the corners it clips).
+        grazing_deg: λ: surfaces seen within this angle of grazing are not joined; nor is
+            anything by a scanner whose beams lie more than λ/2 apart.
 
     Returns:
         (N, 2) points, in beam order.
     """
     keep = scan.valid()
-    keep &= scan.ranges <= max_range
-    # No-returns (inf, NaN) at the origin: they are never joined, and stay finite.
+    # No-returns (inf, NaN) at the sensor: they are never joined, and stay finite.
     ranges = np.where(keep, scan.ranges, 0.0).astype(np.float64)
     angles = scan.angles()
     ends = np.stack([ranges * np.cos(angles), ranges * np.sin(angles)], axis=1)
+    if scan.mount is not None:
+        ends = scan.mount.place(ends)
+    # Cut where ``Submap.from_scans`` cuts the end points: by distance from the base.
+    keep &= np.hypot(ends[:, 0], ends[:, 1]) <= max_range
     step = abs(scan.angle_increment)
     lam = math.radians(grazing_deg)
     gap = np.hypot(*(ends[1:] - ends[:-1]).T)
-    if step <= 0 or step >= lam:
+    if step <= 0 or step > lam / 2:
+        # The detector's bound grows without limit as the beam step nears λ: a scanner that
+        # coarse would have every edge joined, so nothing is.
         joined = np.zeros(len(gap), dtype=bool)
     else:
         near = np.minimum(ranges[:-1], ranges[1:])
@@ -77,5 +84,5 @@ def stretch_points(
     starts = np.cumsum(counts) - counts
     k = np.arange(len(which)) - np.repeat(starts, counts) + 1
     t = (k / np.repeat(counts + 1, counts))[:, None]
-    between = ends[which] + t * (ends[which + 1] - ends[which])
-    return between if scan.mount is None else scan.mount.place(between)
+    between: NDArray[np.float64] = ends[which] + t * (ends[which + 1] - ends[which])
+    return between

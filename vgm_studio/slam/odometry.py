@@ -50,7 +50,7 @@ from vgm_studio.matching.branch_bound import (
 from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.matcher import MatchResult
 from vgm_studio.matching.odometry import kiss_config
-from vgm_studio.matching.refinement import refine_with
+from vgm_studio.matching.refinement import Refinement, refine_with
 from vgm_studio.matching.registration import as_3d, pose_to_4x4
 from vgm_studio.matching.submap import Submap
 
@@ -82,6 +82,10 @@ class Recovery:
     gain: float = 0.1
     step_range: float = 10.0
     sector_deg: float = 60.0
+
+    def __post_init__(self) -> None:
+        if not self.sector_deg > 0:
+            raise ValueError(f"sector_deg must be positive, not {self.sector_deg}")
 
 
 Judge = Callable[[Scan, Scan, Sequence[MatchResult]], NDArray[np.float64]]
@@ -174,17 +178,20 @@ def _recover(
     # The validator chooses among the sectors' bests that the best does not clearly outscore.
     top = max(hit.score for hit in hits)
     hits = [hit for hit in hits if (1.0 + recovery.gain) * hit.score >= top]
-    matches = [_refined(submap, pts, hit, config) for hit in hits]
+    found = [refine_with(submap.target(), pts, hit.pose, config) for hit in hits]
     best = max(range(len(hits)), key=lambda i: hits[i].score)
-    if judge is not None and len(matches) > 1:
-        best = int(np.argmax(judge(previous, current, matches)))
-    found = matches[best].estimate
-    pose = pose_to_4x4(se2.compose(last, found))
+    if judge is not None and len(hits) > 1:
+        matches = [_judged(submap, pts, hit, r, config) for hit, r in zip(hits, found, strict=True)]
+        p = np.asarray(judge(previous, current, matches), dtype=np.float64)
+        if len(p) == len(hits) and np.isfinite(p).any():
+            best = int(np.argmax(np.where(np.isfinite(p), p, -np.inf)))
+    step = found[best].estimate
+    pose = pose_to_4x4(se2.compose(last, step))
     # kiss-icp's map holds this scan where it was lost: start it again from the two scans.
     pipeline.local_map.clear()
     pipeline.local_map.update(pipeline.voxelize(as_3d(submap.points))[1], pose_to_4x4(last))
     pipeline.local_map.update(pipeline.voxelize(as_3d(pts))[1], pose)
-    pipeline.last_delta = pose_to_4x4(found)
+    pipeline.last_delta = pose_to_4x4(step)
     pipeline.last_pose = pose
 
 
@@ -199,13 +206,11 @@ def _sectors(recovery: Recovery, split: bool) -> list[tuple[NDArray[np.float64],
     ]
 
 
-def _refined(
-    submap: Submap, pts: NDArray[np.float64], hit: Hit, config: MatchConfig
+def _judged(
+    submap: Submap, pts: NDArray[np.float64], hit: Hit, refined: Refinement, config: MatchConfig
 ) -> MatchResult:
-    """A search's pose refined on the previous scan, with the figures a validator reads."""
-    target = submap.target()
-    refined = refine_with(target, pts, hit.pose, config)
-    fig = refine_with(target, pts, refined.estimate, config, iterate=False)
+    """A search's refined pose with the figures a validator reads."""
+    fig = refine_with(submap.target(), pts, refined.estimate, config, iterate=False)
     return MatchResult(
         estimate=refined.estimate,
         iterations=refined.iterations,

@@ -150,7 +150,7 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
         fe = dataclasses.replace(fe, sequential_slide_check=False)
     pool = np.flatnonzero(usable)
     keyframes = pool[select_keyframes(odometry[pool], fe.keyframe_distance, fe.keyframe_angle_deg)]
-    scans = [log.scans[i] for i in keyframes]
+    scans = [dataclasses.replace(log.scans[i], keep_points=True) for i in keyframes]
     reference = dense_reference(log, odometry)
     validator = EdgeValidator(
         config.validation, scans, None if reference is None else reference[keyframes]
