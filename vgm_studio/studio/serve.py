@@ -111,13 +111,14 @@ def serve(
     model: Path | None = None,
     precision: float | None = None,
     trainer: TrainerOptions | None = None,
-    ready_seconds: float | None = None,
+    started: float | None = None,
 ) -> None:
     """Starts the studio (and the trainer beside it), says where, and serves until Ctrl-C.
 
     The model's predictions are made in the background: the annotator can start at once, and
     p(success) appears in the panel when they are ready. With ``precision`` the model's calls
-    are cut where its validation precision reaches it (``predict_workspace``).
+    are cut where its validation precision reaches it (``predict_workspace``). ``started``
+    (on ``time.perf_counter``'s clock) is when the wait began, for "ready N s after start".
     """
 
     def train_now() -> None:
@@ -133,7 +134,8 @@ def serve(
             daemon=True,
             name="predict",
         ).start()
-    when = f" (ready {ready_seconds:.1f} s after start)" if ready_seconds is not None else ""
+    ready = None if started is None else time.perf_counter() - started
+    when = f" (ready {ready:.1f} s after start)" if ready is not None else ""
     _say(f"VGM Studio: {store.count_edges()} edges at {studio.url}{when}")
     _say(KEYS)
     if not is_loopback(config.host):

@@ -13,6 +13,7 @@ import math
 import os
 import re
 import tempfile
+import time
 from collections.abc import Callable, Sequence
 from enum import Enum
 from pathlib import Path
@@ -347,3 +348,17 @@ def with_read_options(command: Callable[..., None]) -> Callable[..., None]:
     wrapper.__annotations__ = {p.name: p.annotation for p in params} | {"return": None}
     del wrapper.__wrapped__
     return wrapper
+
+
+def process_start() -> float:
+    """When this process started, on ``time.perf_counter``'s clock: what "ready N s after
+    start" counts from, the interpreter's start and the imports included, as a user waits
+    for them (Linux's ``/proc``; elsewhere, now)."""
+    now = time.perf_counter()
+    try:
+        fields = Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()
+        ticks = int(fields[19])  # field 22 of stat: the start, in clock ticks after boot
+        uptime = float(Path("/proc/uptime").read_text().split()[0])
+        return now - max(0.0, uptime - ticks / os.sysconf("SC_CLK_TCK"))
+    except (OSError, ValueError, IndexError):
+        return now

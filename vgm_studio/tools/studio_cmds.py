@@ -27,6 +27,7 @@ from vgm_studio.tools.options import (
     TokenOpt,
     WorkspaceOpt,
     number,
+    process_start,
     store_location,
     with_read_options,
 )
@@ -105,7 +106,6 @@ def label(
     from vgm_studio.studio.serve import TrainerOptions, added_text, serve
     from vgm_studio.workspace import choose_model, fill_workspace
 
-    start = time.perf_counter()
     folder, url = store_location(workspace, store, models_dir, Path(f"{source.stem}.studio"))
     check_host(host)
     check_port_free(host, port)
@@ -129,7 +129,7 @@ def label(
         model=choose_model(model, no_model, precision=loop_precision or None, warn=_warn),
         precision=loop_precision or None,
         trainer=None if no_trainer else TrainerOptions.checked(retrain_every, base, min_held_out),
-        ready_seconds=time.perf_counter() - start,
+        started=process_start(),
     )
 
 
@@ -196,7 +196,7 @@ def demo(
         model=model,
         precision=precision,
         trainer=None if no_trainer else TrainerOptions.checked(retrain_every, None),
-        ready_seconds=time.perf_counter() - start,
+        started=process_start(),
     )
 
 
