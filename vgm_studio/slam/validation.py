@@ -7,7 +7,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -26,7 +26,7 @@ from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.odometry import Judge
 
 if TYPE_CHECKING:
-    from vgm_studio.model.validator import SecondLook, Validator
+    from vgm_studio.model.validator import Validator
 
 
 class EdgeValidator:
@@ -51,19 +51,14 @@ class EdgeValidator:
         self.config = config
         self._scans = scans
         self._reference = reference
-        self.model: Validator | None = None
         if config.validator == "reference" and reference is None:
             raise InputError(
                 None,
                 "--validator reference needs reference poses: a log with TRUEPOS or a "
                 "corrected log, or --reference with one",
             )
-        self.look: SecondLook | None = None
-        if config.validator in VALIDATOR_MODELS:
-            self.model = _load(config.model, config.validator)
-            from vgm_studio.model.validator import SecondLook  # torch is loaded by now
-
-            self.look = SecondLook(turns=config.second_look)
+        self._rate = _Rater(config) if config.validator in VALIDATOR_MODELS else None
+        self.model: Validator | None = None if self._rate is None else self._rate.model
         self.precision_cut: float | None = None
         if config.loop_precision is not None:
             if self.model is None:
@@ -84,17 +79,11 @@ class EdgeValidator:
                 e.kept = reference_label(ref, e.estimate, self.config.thresholds) == "success"
                 e.p_success = float(e.kept)
         else:
-            assert self.model is not None
-            samples = [
-                sample_from_scans(
-                    self._scans[e.a].points(),
-                    self._scans[e.b].points(),
-                    e.estimate,
-                    e.match.figures(),
-                )
+            assert self.model is not None and self._rate is not None
+            p = self._rate(
+                (self._scans[e.a].points(), self._scans[e.b].points(), e.estimate, e.match)
                 for e in edges
-            ]
-            p = self.model.predict_samples(samples, self.config.batch_size, self.look)
+            )
             bar = self.loop_bar
             assert bar is not None  # a model gives one
             loop = np.array([e.kind == "loop" for e in edges])
@@ -129,17 +118,36 @@ def pair_judge(config: ValidationConfig) -> Judge | None:
     """
     if config.validator not in VALIDATOR_MODELS:
         return None
-    model = _load(config.model, config.validator)
-    from vgm_studio.model.validator import SecondLook  # torch is loaded by now
-
-    look = SecondLook(turns=config.second_look)
+    rate = _Rater(config)
 
     def judge(first: Scan, second: Scan, matches: Sequence[MatchResult]) -> NDArray[np.float64]:
         a, b = first.points(), second.points()
-        samples = [sample_from_scans(a, b, m.estimate, m.figures()) for m in matches]
-        return np.asarray(model.predict_samples(samples, config.batch_size, look))
+        return rate((a, b, m.estimate, m) for m in matches)
 
     return judge
+
+
+Pair = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], MatchResult]
+"""A matched pair as a model reads it: the two scans' points, the estimate, the match."""
+
+
+class _Rater:
+    """A model validator's p(success) of matched pairs, with its second look at the unsure.
+
+    Raises:
+        InputError: The checkpoint is missing, unreadable or of another model.
+    """
+
+    def __init__(self, config: ValidationConfig) -> None:
+        self.model = _load(config.model, config.validator)
+        from vgm_studio.model.validator import SecondLook  # torch is loaded by now
+
+        self._look = SecondLook(turns=config.second_look)
+        self._batch = config.batch_size
+
+    def __call__(self, pairs: Iterable[Pair]) -> NDArray[np.float64]:
+        samples = [sample_from_scans(a, b, est, match.figures()) for a, b, est, match in pairs]
+        return np.asarray(self.model.predict_samples(samples, self._batch, self._look))
 
 
 def _load(path: Path | None, validator: str) -> Validator:
