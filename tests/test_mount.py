@@ -4,6 +4,7 @@ the warning when scans and odometry disagree. Bags of a simulated robot whose la
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import shutil
 import subprocess
@@ -109,6 +110,14 @@ def test_without_tf_the_warning_names_the_options_and_the_options_fix_it(
     assert warning is not None and "\n" not in warning and warning.startswith("warning: ")
     assert "--laser-pose" in warning and "--laser-flipped" in warning
     assert "--odom-topic" in warning and "wheel slip" in warning
+    # With odometry on some scans only, nothing uses it, so the same figures warn of nothing.
+    partial = dataclasses.replace(
+        plain,
+        scans=[
+            s if i % 2 else dataclasses.replace(s, odometry=None) for i, s in enumerate(plain.scans)
+        ],
+    )
+    assert disagreement_warning(partial, agreement) is None
 
     given = open_log(path, OPTIONS)
     assert given.mount == LaserMount(0.3, 0.0, 0.0, True)

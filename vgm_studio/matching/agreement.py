@@ -183,8 +183,13 @@ def edges_agreement(log: ScanLog, edges: Sequence[Edge]) -> Agreement | None:
 
 
 def disagreement_warning(log: ScanLog, agreement: Agreement | None) -> str | None:
-    """The one warning line when the scans and the odometry disagree, else None."""
-    if agreement is None or not agreement.disagrees:
+    """The one warning line when the scans and the odometry disagree, else None.
+
+    None too when only some scans have odometry: the runs then go without it (``slam``'s
+    odometry steers only where every scan has some), so a disagreement would blame the
+    laser's mount for readings nothing used.
+    """
+    if agreement is None or not agreement.disagrees or not log.has_odometry:
         return None
     return agreement.warning(mount_line(log))
 
