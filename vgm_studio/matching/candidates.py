@@ -20,11 +20,15 @@ from tqdm import tqdm
 
 from vgm_studio.core import se2
 from vgm_studio.datasets.relations import MatchedRelation
-from vgm_studio.datasets.scans import ScanLog
+from vgm_studio.datasets.scans import Scan, ScanLog
 from vgm_studio.matching.edges import Edge, EdgeKind, edge_id
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.matching.odometry import lidar_odometry
-from vgm_studio.matching.reference_labels import LabelThresholds, reference_label
+from vgm_studio.matching.reference_labels import (
+    LabelThresholds,
+    contradicts_reference,
+    reference_label,
+)
 
 
 @dataclass(frozen=True)
@@ -236,11 +240,18 @@ def _matched(
 ) -> Edge:
     """One planned pair matched, and labelled against its reference when it has one."""
     p = pair
-    result = matcher.match(log.scans[p.a], log.scans[p.b], p.guess)
+    a, b = log.scans[p.a], log.scans[p.b]
+    result = matcher.match(a, b, p.guess)
     estimate = [float(v) for v in result.estimate]
+    figures = result.figures()
     label: Literal["success", "failure", "ambiguous"] | None = None
     if p.reference is not None:
         label = reference_label(p.reference, estimate, thresholds)
+        if label == "failure" and thresholds.check_reference:
+            check = _reference_check(a, b, p.reference, result.estimate, matcher, thresholds)
+            figures["reference_check"] = check
+            if check["contradicted"]:
+                label = "ambiguous"
     return Edge(
         # A scan pair matched under another laser mount is another edge.
         edge_id=edge_id(
@@ -255,8 +266,31 @@ def _matched(
         kind=p.kind,
         guess=[float(v) for v in p.guess],
         estimate=estimate,
-        match=result.figures(),
+        match=figures,
         reference=None if p.reference is None else [float(v) for v in p.reference],
         label=label,
         params=recorded,
     )
+
+
+def _reference_check(
+    a: Scan,
+    b: Scan,
+    reference: NDArray[np.float64],
+    estimate: NDArray[np.float64],
+    matcher: ScanMatcher,
+    thresholds: LabelThresholds,
+) -> dict[str, Any]:
+    """The matcher started at the reference, and whether the scans contradict the reference
+    (``reference_labels.contradicts_reference``), as JSON-ready figures."""
+    reference = np.asarray(reference, dtype=np.float64)
+    rest = matcher.match(a, b, reference)
+    at_reference = matcher.agreement_at(a, b, reference)
+    return {
+        "from_reference": [float(v) for v in rest.estimate],
+        "inlier_ratio_at_reference": at_reference,
+        "inlier_ratio_from_reference": rest.inlier_ratio,
+        "contradicted": contradicts_reference(
+            estimate, rest.estimate, at_reference, rest.inlier_ratio, thresholds
+        ),
+    }

@@ -103,6 +103,14 @@ class ScanMatcher:
         """Drops a scan's cached structures (for long logs streamed through)."""
         self._cache.pop(id(scan), None)
 
+    def agreement_at(self, a: Scan, b: Scan, pose: NDArray[np.float64]) -> float:
+        """Share of scan b's points that agree with scan a with b at ``pose`` (not moved)."""
+        pa, pb = self._prepare(a), self._prepare(b)
+        if pa.target is None or len(pb.points) < 3:
+            return 0.0
+        pose = np.asarray(pose, dtype=np.float64)
+        return refine_with(pa.target, pb.points, pose, self.config, iterate=False).inlier_ratio
+
     def match(self, a: Scan, b: Scan, guess: NDArray[np.float64]) -> MatchResult:
         """Estimates the pose of scan b in the frame of scan a, starting from ``guess``."""
         pa, pb = self._prepare(a), self._prepare(b)

@@ -15,12 +15,16 @@ from vgm_studio.matching.edges import Label
 class LabelThresholds:
     """With e = reference⁻¹ ∘ estimate: ``success`` when |e_xy| ≤ success_xy and
     |e_θ| ≤ success_theta_deg; ``failure`` when |e_xy| ≥ failure_xy or |e_θ| ≥ failure_theta_deg;
-    ``ambiguous`` in between."""
+    ``ambiguous`` in between.
+
+    ``check_reference``: a failure is ``ambiguous`` when the scans contradict the reference
+    (``contradicts_reference``)."""
 
     success_xy: float = 0.10
     success_theta_deg: float = 2.0
     failure_xy: float = 0.30
     failure_theta_deg: float = 5.0
+    check_reference: bool = True
 
 
 def reference_label(
@@ -35,3 +39,31 @@ def reference_label(
     if exy >= t.failure_xy or eth_deg >= t.failure_theta_deg:
         return "failure"
     return "ambiguous"
+
+
+def contradicts_reference(
+    estimate: ArrayLike,
+    from_reference: ArrayLike,
+    agreement_at_reference: float,
+    agreement_from_reference: float,
+    thresholds: LabelThresholds | None = None,
+) -> bool:
+    """Do the scans, rather than the matcher, disagree with the reference?
+
+    A failure label says the matcher left the right pose. But when the matcher, started at
+    the reference itself, comes to rest where the estimate is (within the success
+    tolerance) and more of scan b agrees with scan a there than at the reference, the
+    reference is no resting point of the scans: the matcher failed nobody. Corrected logs
+    hold such references where their own map is torn (a revisit some 10° off in CSAIL's).
+
+    Args:
+        estimate: The matcher's estimate from its guess.
+        from_reference: The matcher's estimate started at the reference.
+        agreement_at_reference: Inlier share at the reference.
+        agreement_from_reference: Inlier share at ``from_reference``.
+        thresholds: The success tolerance.
+    """
+    t = thresholds or LabelThresholds()
+    exy, eth = se2.pose_error(estimate, from_reference)
+    same_rest = exy <= t.success_xy and math.degrees(eth) <= t.success_theta_deg
+    return same_rest and agreement_from_reference > agreement_at_reference

@@ -44,6 +44,12 @@ class EdgeRun:
                 lines.append(
                     f"{kind:<12}" + "".join(f"{counts[(kind, lab)]:>12}" for lab in _LABELS)
                 )
+        torn = sum(bool(e.match.get("reference_check", {}).get("contradicted")) for e in self.edges)
+        if torn:
+            lines.append(
+                f"{torn} of the ambiguous would be failures, but the scans contradict their "
+                "reference (--no-check-reference keeps them failures)"
+            )
         return "\n".join(lines)
 
 

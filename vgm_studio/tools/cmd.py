@@ -189,6 +189,13 @@ def candidates(
     success_theta: Annotated[float, positive("…and |e_θ| ≤ this (deg).")] = 2.0,
     failure_xy: Annotated[float, positive("Failure: |e_xy| ≥ this (m, > success)…")] = 0.30,
     failure_theta: Annotated[float, positive("…or |e_θ| ≥ this (deg, > success).")] = 5.0,
+    check_reference: Annotated[
+        bool,
+        typer.Option(
+            help="Call a failure ambiguous when the scans contradict the reference: matched "
+            "from the reference they come to rest on the estimate, agreeing better there."
+        ),
+    ] = True,
     time_tolerance: TimeToleranceOpt = 0.05,
     time_offset: Annotated[
         float,
@@ -226,7 +233,9 @@ def candidates(
         noise_xy=noise_xy,
         noise_theta_deg=noise_theta,
     )
-    thresholds = LabelThresholds(success_xy, success_theta, failure_xy, failure_theta)
+    thresholds = LabelThresholds(
+        success_xy, success_theta, failure_xy, failure_theta, check_reference
+    )
     join = JoinOptions(time_tolerance, time_offset)
     run = make_edge_file(log, out, read, reference, join, config, thresholds, warn=_warn)
     typer.echo(run.table())
