@@ -284,13 +284,14 @@ def _reference_check(
     """The matcher started at the reference, and whether the scans contradict the reference
     (``reference_labels.contradicts_reference``), as JSON-ready figures."""
     reference = np.asarray(reference, dtype=np.float64)
-    rest = matcher.match(a, b, reference)
-    at_reference = matcher.agreement_at(a, b, reference)
+    rest = matcher.match(a, b, reference).estimate
+    figures = [matcher.judge(a, b, pose) for pose in (reference, rest)]
+    at_reference, at_rest = ((0.0, 0.0) if f is None else (f.inlier_ratio, f.fit) for f in figures)
     return {
-        "from_reference": [float(v) for v in rest.estimate],
-        "inlier_ratio_at_reference": at_reference,
-        "inlier_ratio_from_reference": rest.inlier_ratio,
-        "contradicted": contradicts_reference(
-            estimate, rest.estimate, at_reference, rest.inlier_ratio, thresholds
-        ),
+        "from_reference": [float(v) for v in rest],
+        "inlier_ratio_at_reference": at_reference[0],
+        "inlier_ratio_from_reference": at_rest[0],
+        "fit_at_reference": at_reference[1],
+        "fit_from_reference": at_rest[1],
+        "contradicted": contradicts_reference(estimate, rest, at_reference, at_rest, thresholds),
     }

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.matching.config import MatchConfig
-from vgm_studio.matching.refinement import Target, refine_with
+from vgm_studio.matching.refinement import Refinement, Target, refine_with
 from vgm_studio.matching.registration import KissRegistration
 
 
@@ -103,13 +103,14 @@ class ScanMatcher:
         """Drops a scan's cached structures (for long logs streamed through)."""
         self._cache.pop(id(scan), None)
 
-    def agreement_at(self, a: Scan, b: Scan, pose: NDArray[np.float64]) -> float:
-        """Share of scan b's points that agree with scan a with b at ``pose`` (not moved)."""
+    def judge(self, a: Scan, b: Scan, pose: NDArray[np.float64]) -> Refinement | None:
+        """How scan b at ``pose`` (not moved) agrees with scan a; None where either has too
+        few points to say."""
         pa, pb = self._prepare(a), self._prepare(b)
         if pa.target is None or len(pb.points) < 3:
-            return 0.0
+            return None
         pose = np.asarray(pose, dtype=np.float64)
-        return refine_with(pa.target, pb.points, pose, self.config, iterate=False).inlier_ratio
+        return refine_with(pa.target, pb.points, pose, self.config, iterate=False)
 
     def match(self, a: Scan, b: Scan, guess: NDArray[np.float64]) -> MatchResult:
         """Estimates the pose of scan b in the frame of scan a, starting from ``guess``."""

@@ -52,6 +52,7 @@ class Refinement:
         inlier_ratio: Share of source points with a correspondence and |r| < inlier distance.
         residual: RMS point-to-line residual of the inliers, in metres.
         covariance: 3×3 covariance of (x, y, θ), σ̂²·(JᵀWJ)⁻¹; None when degenerate.
+        paired_ratio: Share of source points with a correspondence (within the gate).
     """
 
     estimate: NDArray[np.float64]
@@ -60,6 +61,13 @@ class Refinement:
     inlier_ratio: float
     residual: float
     covariance: NDArray[np.float64] | None
+    paired_ratio: float = 0.0
+
+    @property
+    def fit(self) -> float:
+        """Share of the paired points that are inliers: how well the overlap fits, whatever
+        its size."""
+        return self.inlier_ratio / self.paired_ratio if self.paired_ratio > 0 else 0.0
 
 
 def _residuals(
@@ -178,6 +186,7 @@ def _judged(
         inlier_ratio=count / max(len(source), 1),
         residual=residual,
         covariance=covariance,
+        paired_ratio=int(found.sum()) / max(len(source), 1),
     )
 
 
