@@ -168,6 +168,11 @@ def test_a_run_starts_from_the_given_checkpoint_and_refuses_another_model(tmp_pa
     wrong = replace(config, init=str(tmp_path / "s.pt"))
     with pytest.raises(InputError, match=r"s\.pt.*is a score checkpoint"):
         train(data, wrong, tmp_path / "d.pt", **quiet)
+    # Weights learnt on other VGMs (the paper's 5 cm grid) do not start a run on vgmnet's.
+    paper_grid = train(data, replace(config, vgm=VGMParams()), tmp_path / "p.pt", **quiet)
+    assert paper_grid.vgm == VGMParams() != first.vgm
+    with pytest.raises(InputError, match=r"p\.pt.*other settings"):
+        train(data, replace(config, init=str(tmp_path / "p.pt")), tmp_path / "e.pt", **quiet)
 
 
 def test_precise_batch_norm_recomputes_the_statistics_and_leaves_the_learning_alone(rows):

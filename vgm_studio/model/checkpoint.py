@@ -63,10 +63,12 @@ class Checkpoint:
     created: str = field(default_factory=_now)
     curve: PrecisionCurve | None = None
 
-    def starts(self, model: str, hyper: dict[str, Any]) -> dict[str, torch.Tensor] | None:
-        """Its weights, when they fit a ``model`` network built with ``hyper`` (a warm
-        start); None when it is another model or other settings."""
-        same = self.model == model and self.hyper == hyper
+    def starts(
+        self, model: str, hyper: dict[str, Any], vgm: VGMParams
+    ) -> dict[str, torch.Tensor] | None:
+        """Its weights, when they fit a ``model`` network built with ``hyper`` that reads
+        ``vgm`` VGMs (a warm start); None when it is another model or other settings."""
+        same = self.model == model and self.hyper == hyper and self.vgm == vgm
         return self.state_dict if same else None
 
     def to_dict(self) -> dict[str, Any]:

@@ -24,7 +24,7 @@ from vgm_studio.model.checkpoint import Checkpoint
 from vgm_studio.model.features import PairSample
 from vgm_studio.model.fitting import EpochHook, Recipe, Rows, fit_network
 from vgm_studio.model.operating import PrecisionCurve, precision_curve
-from vgm_studio.model.registry import MODELS, build_network
+from vgm_studio.model.registry import MODELS, build_network, entry
 from vgm_studio.model.validator import input_spec
 from vgm_studio.vgm.grid import VGMParams
 
@@ -60,7 +60,8 @@ class FitConfig:
     augment: bool = True
     seed: int = 0
     hyper: dict[str, Any] = field(default_factory=lambda: {"figures": True, "spread": True})
-    vgm: VGMParams = field(default_factory=VGMParams)
+    # The bundled model's, which a run starts from.
+    vgm: VGMParams = field(default_factory=lambda: entry(MODEL).vgm)
 
     def recipe(self) -> Recipe:
         """The shared training loop's part of the config."""
@@ -108,7 +109,7 @@ def fit(
     torch.manual_seed(config.seed)
     # Built on the CPU and trained there: beside the app, the GPU, if any, is not ours to take.
     net, hyper = build_network(MODEL, config.hyper)
-    weights = init.starts(MODEL, hyper) if init is not None else None
+    weights = init.starts(MODEL, hyper, config.vgm) if init is not None else None
     warm = weights is not None
     if weights is not None:
         net.load_state_dict(weights)
