@@ -114,3 +114,27 @@ def test_exact_references_along_featureless_corridors_stay_failures(tmp_path):
     assert len(checked) >= 20  # failures enough to say something
     assert all(e.label == "failure" for e in checked)
     assert "contradict" not in made.stdout
+
+
+def test_csails_torn_references_are_named_and_the_option_keeps_them(datasets, tmp_path):
+    """CSAIL's corrected poses turn one revisit ~12° off; its loops that the scans contradict
+    come out ambiguous, counted on stdout, and --no-check-reference keeps them failures."""
+    log = datasets / "radish-corrected" / "csail-corrected.log"
+    checked = cli("candidates", log, "--no-sequential", "--out", tmp_path / "c.jsonl")
+    plain = cli(
+        "candidates", log, "--no-sequential", "--no-check-reference", "--out", tmp_path / "p.jsonl"
+    )
+    assert checked.returncode == 0 and plain.returncode == 0, checked.stderr + plain.stderr
+    ours, theirs = read_edges(tmp_path / "c.jsonl"), read_edges(tmp_path / "p.jsonl")
+    assert [e.edge_id for e in ours] == [e.edge_id for e in theirs]  # the same matches
+    torn = [e for e in ours if e.match.get("reference_check", {}).get("contradicted")]
+    assert len(torn) >= 3 and all(e.label == "ambiguous" for e in torn)
+    assert f"{len(torn)} of the ambiguous would be failures" in checked.stdout
+    was = {e.edge_id: e.label for e in theirs}
+    assert all(was[e.edge_id] == "failure" for e in torn)
+    # Only those changed, and at rest the paired points fit 1.5 times as well or better.
+    changed = [e for e in ours if e.label != was[e.edge_id]]
+    assert changed == torn
+    for e in torn:
+        rest = e.match["reference_check"]
+        assert rest["fit_from_reference"] >= 1.5 * rest["fit_at_reference"]
