@@ -14,6 +14,7 @@ one; ``--retrain`` trains them all again).
 
 Run: python benchmarks/bench_generalisation.py [--models vgmnet,score] [--buildings orebro]
      [--epochs 12] [--epoch-size 6000] [--max-train N] [--retrain] [--second-look 4]
+     [--cell 0.1]
 
 ``--second-look 4`` tests the network models with ``validator.SecondLook``: the pairs they
 are unsure of (p between 0.02 and 0.98) judged again, their logits averaged over the pair
@@ -131,6 +132,7 @@ def _fold_rows(fold, data, origin: list[str], models: list[str], args) -> list[l
     from vgm_studio.model.checkpoint import load_checkpoint
     from vgm_studio.model.training import TrainConfig, train
     from vgm_studio.model.validator import SecondLook, Validator
+    from vgm_studio.vgm.grid import VGMParams
 
     test = subset(data, origin, [fold.test])
     training = subset(data, origin, fold.train)
@@ -147,8 +149,11 @@ def _fold_rows(fold, data, origin: list[str], models: list[str], args) -> list[l
             device="cpu",
             # The bundled default's inputs (train_default.py: the command's defaults).
             hyper={"figures": True, "spread": True} if model == "vgmnet" else {},
+            vgm=VGMParams(resolution=args.cell if model == "vgmnet" else VGMParams().resolution),
         )
-        if args.retrain or not out.exists():
+        # A fold model on other VGMs (another --cell) is trained again, not reused.
+        stale = out.exists() and load_checkpoint(out).vgm != config.vgm
+        if args.retrain or stale or not out.exists():
             train(training, config, out, progress=False, log=lambda _line: None)
         elif "calibration_edges" not in load_checkpoint(out).training:
             print(recalibrate(out, training), flush=True)  # trained before the rule
@@ -172,6 +177,12 @@ def main() -> None:
     parser.add_argument("--max-train", type=int, default=None, help="Cap training edges.")
     parser.add_argument(
         "--retrain", action="store_true", help="Train fold models again even if present."
+    )
+    parser.add_argument(
+        "--cell",
+        type=float,
+        default=0.05,
+        help="vgmnet's VGM cell edge in metres (vgm-studio train --cell-size; 0.1: 40 m VGMs).",
     )
     parser.add_argument(
         "--second-look",
@@ -217,6 +228,7 @@ def main() -> None:
             if m != "score"
         )
         + (f", at most {args.max_train} training edges" if args.max_train else "")
+        + (f"; vgmnet on {args.cell:g} m cells" if "vgmnet" in models else "")
         + (f"; a second look over {args.second_look} turns" if args.second_look > 1 else "")
         + "; 2 CPU cores"
     )

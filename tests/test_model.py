@@ -16,7 +16,6 @@ from vgm_studio.matching.edges import write_edges
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.model.features import PairSample, rgb_plot, vgm_batch
 from vgm_studio.model.metrics import binary_metrics, roc_auc
-from vgm_studio.model.registry import entry
 from vgm_studio.model.training import (
     TrainConfig,
     choose_threshold,
@@ -149,7 +148,7 @@ def test_tiny_model_beats_chance_on_held_out_log(sim_edges, tmp_path):
     assert data.labels.sum() > 30 and (~data.labels).sum() > 30
     config = TrainConfig(
         model="vgmnet",
-        epochs=5,
+        epochs=3,
         epoch_size=768,
         batch_size=32,
         seed=0,
@@ -160,12 +159,10 @@ def test_tiny_model_beats_chance_on_held_out_log(sim_edges, tmp_path):
     checkpoint = train(data, config, out, progress=False, log=lambda _: None)
     assert out.is_file() and len(checkpoint.training["config"]) > 5
     validator = Validator.load(out)
-    # Trained and judged on the network's own VGMs (10 cm cells, 40 m across).
-    assert checkpoint.vgm == entry("vgmnet").vgm == validator.vgm != VGMParams()
     probs = validator.predict_samples(held.samples)
     m = binary_metrics(held.labels, probs, validator.threshold)
     balanced = 0.5 * (m["tp"] / (m["tp"] + m["fn"]) + m["tn"] / (m["tn"] + m["fp"]))
-    # Chance is 0.5 for both; five short epochs on one small log already do much better.
+    # Chance is 0.5 for both; three short epochs on one small log already do much better.
     assert m["auc"] > 0.65, m
     assert balanced > 0.58, m
 
@@ -272,6 +269,11 @@ def test_train_and_eval_commands(sim_edges, tmp_path):
     assert wrong_suffix.returncode == 2 and ".pt" in wrong_suffix.stderr
     missing = cli("eval", tmp_path / "none.pt", sim_edges[1])
     assert missing.returncode == 1 and "no such model file" in missing.stderr
+    coarse = cli("train", sim_edges[0], "--model", "score", "--cell-size", 0.1, "--out", model)
+    assert coarse.returncode == 0, coarse.stderr
+    assert Validator.load(model).vgm == VGMParams(resolution=0.1)
+    zero = cli("train", sim_edges[0], "--cell-size", 0, "--out", model)
+    assert zero.returncode == 2 and "--cell-size" in zero.stderr and "Traceback" not in zero.stderr
 
 
 @pytest.mark.parametrize(("occupancy", "spread"), [(False, False), (True, True)])
@@ -341,6 +343,7 @@ def test_train_command_defaults_are_the_train_config_defaults():
     shared += ["max_train", "augment", "seed", "bn_batches", "threads"]
     for name in shared:
         assert params[name].default == getattr(defaults, name), name
+    assert params["cell_size"].default == defaults.vgm.resolution
 
 
 @pytest.mark.parametrize("occupancy", [False, True])

@@ -148,6 +148,7 @@ def _labelled(count: int, seed: int):
 def test_a_run_starts_from_the_given_checkpoint_and_refuses_another_model(tmp_path):
     from vgm_studio.model.checkpoint import load_checkpoint
     from vgm_studio.model.training import TrainConfig, train
+    from vgm_studio.model.validator import Validator
 
     data = _labelled(48, seed=6)
     quiet = {"progress": False, "log": lambda _line: None}
@@ -168,11 +169,13 @@ def test_a_run_starts_from_the_given_checkpoint_and_refuses_another_model(tmp_pa
     wrong = replace(config, init=str(tmp_path / "s.pt"))
     with pytest.raises(InputError, match=r"s\.pt.*is a score checkpoint"):
         train(data, wrong, tmp_path / "d.pt", **quiet)
-    # Weights learnt on other VGMs (the paper's 5 cm grid) do not start a run on vgmnet's.
-    paper_grid = train(data, replace(config, vgm=VGMParams()), tmp_path / "p.pt", **quiet)
-    assert paper_grid.vgm == VGMParams() != first.vgm
-    with pytest.raises(InputError, match=r"p\.pt.*other settings"):
-        train(data, replace(config, init=str(tmp_path / "p.pt")), tmp_path / "e.pt", **quiet)
+    # A run on 10 cm cells records them, its validator builds its VGMs on them, and its
+    # weights do not start a run on the paper's 5 cm cells.
+    coarse = replace(config, vgm=VGMParams(resolution=0.1))
+    assert train(data, coarse, tmp_path / "w.pt", **quiet).vgm == coarse.vgm != first.vgm
+    assert Validator.load(tmp_path / "w.pt").vgm == coarse.vgm
+    with pytest.raises(InputError, match=r"w\.pt.*other settings"):
+        train(data, replace(config, init=str(tmp_path / "w.pt")), tmp_path / "e.pt", **quiet)
 
 
 def test_precise_batch_norm_recomputes_the_statistics_and_leaves_the_learning_alone(rows):

@@ -8,12 +8,11 @@ validator is one module (its network, or a model fitted in closed form) and one 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from vgm_studio.errors import InputError
-from vgm_studio.vgm.grid import VGMParams
 
 if TYPE_CHECKING:  # torch loads when a network is built, not when the command line starts
     from torch import nn
@@ -49,7 +48,6 @@ class ModelEntry:
         background: Whether the background trainer can train it.
         validator: The SLAM run's ``--validator`` that uses its checkpoints (None: none).
         hyper: Its hyper-parameters from the command line's switches.
-        vgm: The VGMs it is trained on unless told otherwise.
     """
 
     name: str
@@ -59,7 +57,6 @@ class ModelEntry:
     background: bool
     validator: str | None
     hyper: Callable[[HyperFlags], dict[str, Any]]
-    vgm: VGMParams = field(default_factory=VGMParams)
 
 
 def _built(network: type[nn.Module], config_type: type, hyper: dict[str, Any]) -> Built:
@@ -106,11 +103,6 @@ MODELS: tuple[ModelEntry, ...] = (
         background=True,
         validator="vgmnet",
         hyper=_vgmnet_hyper,
-        # 10 cm cells: 40 m across, where the paper's 5 cm cells span 20 m and leave out 40%
-        # of a campus scan's points (half of them in one in three of freiburg-campus's loops),
-        # which those loops were judged without. The Gaussians still place each cell's points
-        # within it, and the fold stays 8 cells.
-        vgm=VGMParams(resolution=0.10),
     ),
     ModelEntry(
         name="vgmnet-paper",

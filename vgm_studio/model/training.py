@@ -64,7 +64,7 @@ class TrainConfig:
         threads: torch CPU threads (None: torch's default).
         init: A checkpoint of the same model and hyper-parameters whose weights the run
             starts from (a second schedule on a slow network); None starts fresh.
-        vgm: VGM parameters (None: the model's own, ``registry.ModelEntry.vgm``).
+        vgm: VGM parameters.
         hyper: Network hyper-parameters overriding the model's defaults.
     """
 
@@ -84,16 +84,12 @@ class TrainConfig:
     device: str = "auto"
     threads: int | None = None
     init: str | None = None
-    vgm: VGMParams | None = None
+    vgm: VGMParams = field(default_factory=VGMParams)
     hyper: dict[str, Any] = field(default_factory=dict)
 
     def recipe(self) -> Recipe:
         """The training loop's part of the config."""
         return Recipe.of(self)
-
-    def vgm_params(self) -> VGMParams:
-        """The VGMs the model is trained on."""
-        return self.vgm or entry(self.model).vgm
 
 
 @dataclass
@@ -245,7 +241,7 @@ def _fit_score(rows: Rows, config: TrainConfig) -> tuple[Checkpoint, NDArray[np.
     probs = score.predict(figures_matrix([rows.samples[i] for i in rows.val], spread))
     checkpoint = Checkpoint(
         model=config.model,
-        vgm=config.vgm_params(),
+        vgm=config.vgm,
         hyper={"spread": spread} if spread else {},
         score=asdict(score),
     )
@@ -260,16 +256,16 @@ def _fit_network(
     device = pick_device(config.device)
     net, hyper = build_network(config.model, config.hyper)
     if config.init is not None:
-        weights = _initial_weights(Path(config.init), config.model, hyper, config.vgm_params())
+        weights = _initial_weights(Path(config.init), config.model, hyper, config.vgm)
         net.load_state_dict(weights)
     net = net.to(device).to(memory_format=torch.channels_last)  # type: ignore[call-overload]
-    spec = input_spec(config.model, hyper, config.vgm_params())
+    spec = input_spec(config.model, hyper, config.vgm)
     fitted = fit_network(
         net, spec, rows, config.recipe(), log=log, progress=progress, resume=resume
     )
     checkpoint = Checkpoint(
         model=config.model,
-        vgm=config.vgm_params(),
+        vgm=config.vgm,
         hyper=hyper,
         state_dict=fitted.state_dict,
         history=fitted.history,
