@@ -18,6 +18,7 @@ from vgm_studio.matching.edges import read_edges
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.matching.reference_labels import LabelThresholds, contradicts_reference
 from vgm_studio.simulation.raycast import beam_angles, cast
+from vgm_studio.vgm.picture import edge_caption
 
 # A room with an alcove and a pillar-like box: every direction of a match is fixed.
 WALLS = np.array(
@@ -138,3 +139,5 @@ def test_csails_torn_references_are_named_and_the_option_keeps_them(datasets, tm
     for e in torn:
         rest = e.match["reference_check"]
         assert rest["fit_from_reference"] >= 1.5 * rest["fit_at_reference"]
+        # The edge's picture says why it is no failure.
+        assert any("contradict the reference" in line for line in edge_caption(e, False).lines)

@@ -42,6 +42,13 @@ def edge_caption(edge: Edge, use_guess: bool) -> Caption:
         exy, eth = se2.pose_error(edge.reference, pose)
         error = f"{100 * exy:.1f} cm, {math.degrees(eth):.2f} deg"
         lines.append(f"{drawn} vs reference: {error}")
+    check = m.get("reference_check")
+    if isinstance(check, dict) and check.get("contradicted"):
+        # Why a pair this far off its reference is not a failure.
+        lines.append(
+            f"scans contradict the reference (fit {check.get('fit_at_reference', 0):.2f} "
+            f"there, {check.get('fit_from_reference', 0):.2f} at rest)"
+        )
     return Caption(tuple(lines), headline=headline)
 
 

@@ -202,7 +202,9 @@ def _add_caption(
     legend = [("previous", PREV_BGR), ("current", CUR_BGR)]
     if ghost:
         legend.append(("reference", GHOST_BGR))
-    rows = max(len(caption.lines), len(legend))
+    # The legend has a row of its own under the text: beside it, a long caption line ran
+    # under the legend's words.
+    rows = len(caption.lines) + 1
     bar = np.full((head_h + line_h * rows + 12, img.shape[1], 3), 40, dtype=np.uint8)
     if caption.headline:
         cv2.putText(
@@ -226,9 +228,8 @@ def _add_caption(
             1,
             cv2.LINE_AA,
         )
-    legend_y = head_h + 20
+    x, legend_y = 16, head_h + 20 + len(caption.lines) * line_h
     for text, colour in legend:
-        x = img.shape[1] - 120
         filled = -1 if colour is not GHOST_BGR else 2
         cv2.circle(bar, (x, legend_y - 5), 6, _bgr(colour), filled, cv2.LINE_AA)
         cv2.putText(
@@ -241,5 +242,6 @@ def _add_caption(
             1,
             cv2.LINE_AA,
         )
-        legend_y += line_h
+        (width, _), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)
+        x += 12 + width + 24
     return np.vstack([bar, img])
