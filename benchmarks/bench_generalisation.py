@@ -149,7 +149,7 @@ def _fold_rows(fold, data, origin: list[str], models: list[str], args) -> list[l
             device="cpu",
             # The bundled default's inputs (train_default.py: the command's defaults).
             hyper={"figures": True, "spread": True} if model == "vgmnet" else {},
-            vgm=VGMParams(resolution=args.cell if model == "vgmnet" else VGMParams().resolution),
+            vgm=VGMParams(resolution=args.cell) if model == "vgmnet" else VGMParams(),
         )
         # A fold model on other VGMs (another --cell) is trained again, not reused.
         stale = out.exists() and load_checkpoint(out).vgm != config.vgm
