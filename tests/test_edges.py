@@ -58,6 +58,8 @@ def test_round_trip(tmp_path):
     ("text", "message"),
     [
         ("{not json", "not JSON"),
+        # json says "starting at", and the message adds the column once
+        ('{"edge_id": "cut off', r"not JSON \(Unterminated string starting at column 13\)"),
         ('{"edge_id": "x"}', "log_path: missing"),
         ("[1, 2]", "must be a JSON object"),
     ],

@@ -196,7 +196,9 @@ def load_json_line(text: str, path: Path | str | None, line: int | None) -> Any:
     except RecursionError:
         raise InputError(path, f"not JSON we read (nested deeper than {MAX_DEPTH})", line) from None
     except json.JSONDecodeError as exc:
-        raise InputError(path, f"not JSON ({exc.msg} at column {exc.colno})", line) from None
+        # json's own wording of some errors ends in "at" ("Unterminated string starting at").
+        what = exc.msg.removesuffix(" at")
+        raise InputError(path, f"not JSON ({what} at column {exc.colno})", line) from None
     except ValueError as exc:  # NaN/Infinity, or an integer past Python's digit limit
         reason = "an integer too long" if "digits" in str(exc) else str(exc)
         raise InputError(path, f"not JSON we read ({reason})", line) from None
