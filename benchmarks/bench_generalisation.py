@@ -138,7 +138,9 @@ def _fold_rows(fold, data, origin: list[str], models: list[str], args) -> list[l
     training = subset(data, origin, fold.train)
     rows = []
     for model in models:
-        out = BUILD / "folds" / f"{fold.held_out}-{model}.pt"
+        # A grid other than the paper's is in the name, so fold models on both grids are kept.
+        grid = f"-cell{args.cell:g}" if model == "vgmnet" and args.cell != 0.05 else ""
+        out = BUILD / "folds" / f"{fold.held_out}-{model}{grid}.pt"
         out.parent.mkdir(parents=True, exist_ok=True)  # a fresh clone has no build/ yet
         epochs, epoch_size = _recipe(model)
         config = TrainConfig(
