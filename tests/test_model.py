@@ -15,7 +15,7 @@ from vgm_studio.matching.candidates import CandidateConfig, make_candidates
 from vgm_studio.matching.edges import write_edges
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.model.features import PairSample, rgb_plot, vgm_batch
-from vgm_studio.model.metrics import binary_metrics, roc_auc
+from vgm_studio.model.metrics import binary_metrics, paired_comparison, roc_auc
 from vgm_studio.model.training import (
     TrainConfig,
     choose_threshold,
@@ -46,6 +46,21 @@ def test_metrics_against_hand_computed_values():
     assert np.isnan(roc_auc([True, True], [0.1, 0.2]))
     nothing_predicted = binary_metrics([True, False], [0.1, 0.2])
     assert nothing_predicted["precision"] == 0.0 and nothing_predicted["f1"] == 0.0
+
+
+def test_paired_comparison_against_hand_computed_values():
+    # Pairs both get right or both get wrong carry no evidence; of the 7 they split on, the
+    # first is right on 5: P(a 5/2 split or more uneven, either way) = 2 (1 + 7 + 21) / 2^7.
+    first = [True] * 5 + [False] * 2 + [True, False]
+    second = [False] * 5 + [True] * 2 + [True, False]
+    c = paired_comparison(first, second)
+    assert (c.only_first, c.only_second) == (5, 2)
+    assert c.p_value == pytest.approx(58 / 128)
+    # One model right on all 8 pairs they split on: 2 / 2^8.
+    assert paired_comparison([True] * 8, [False] * 8).p_value == pytest.approx(2 / 256)
+    assert paired_comparison([True, False], [True, False]).p_value == 1.0
+    with pytest.raises(ValueError, match="judged on"):
+        paired_comparison([True], [True, False])
 
 
 def test_threshold_chosen_on_validation():
