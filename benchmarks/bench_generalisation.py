@@ -267,10 +267,6 @@ def _summary(rows: list[list[str]], models: list[str]) -> None:
         print(f"vgmnet ahead of rgb-baseline on accuracy: {ahead} of {len(pairs)} buildings")
 
 
-if __name__ == "__main__":
-    sys.exit(main())
-
-
 def _paired(right: dict[tuple[str, str], Any]) -> None:
     """Per building, the loops only ``vgmnet`` or only ``rgb-baseline`` judged right, and
     whether that split is more than chance (exact McNemar test): on a building of 50 loops
@@ -290,3 +286,7 @@ def _paired(right: dict[tuple[str, str], Any]) -> None:
     if rows:
         header = ["held out", "only vgmnet right", "only rgb-baseline right", "exact p", "ahead"]
         print(table(header, rows))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -61,3 +61,27 @@ def test_a_log_on_both_sides_is_refused(buildings, tmp_path):
     twin = Building("d", made[0].train, _copy(edges, tmp_path / "d.jsonl", "log-a", "loop"))
     with pytest.raises(ValueError, match="also trains on its log"):
         make_folds([*made, twin], sims, ["d"])
+
+
+def test_paired_table_says_which_leads_chance_can_explain(monkeypatch, capsys):
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "benchmarks"))
+    import bench_generalisation
+
+    right = {
+        # vgmnet right on all ten pairs rgb-baseline gets wrong: 2 / 2^10.
+        ("big", "vgmnet"): [True] * 10,
+        ("big", "rgb-baseline"): [False] * 10,
+        ("even", "vgmnet"): [True, False],
+        ("even", "rgb-baseline"): [False, True],
+        # One pair in three: behind, but nothing chance cannot explain.
+        ("small", "vgmnet"): [True, True, False],
+        ("small", "rgb-baseline"): [True, True, True],
+        ("score-only", "score"): [True],
+    }
+    bench_generalisation._paired(right)
+    rows = {line.split("|")[1].strip(): line for line in capsys.readouterr().out.splitlines()}
+    assert "| 10 " in rows["big"] and "0.002" in rows["big"] and "chance" not in rows["big"]
+    assert rows["big"].rstrip(" |").endswith("vgmnet")
+    assert "level" in rows["even"] and "1.000" in rows["even"]
+    assert "rgb-baseline (chance can explain it)" in rows["small"]
+    assert "score-only" not in rows
