@@ -9,8 +9,13 @@ precision ≥ 0.99 twice: at the cut the validation curve picks for 0.99 (what
 ``--loop-precision 0.99`` would use; its test precision beside it) and the best any cut on
 the test curve reaches (an upper bound, chosen on the test set).
 
+The table ends with the paired comparison of ``vgmnet`` and ``rgb-baseline`` per building:
+the loops only one of them judged right, and the exact McNemar p of that split, so a lead of
+one or two loops on a small building reads as what it is.
+
 Fold models already in build/edges/folds are used again (a stopped run goes on with the next
-one; ``--retrain`` trains them all again).
+one; ``--retrain`` trains them all again). A ``vgmnet`` fold on cells other than 5 cm has
+its grid in the file name (``intel-vgmnet-cell0.1.pt``), so both grids' folds are kept.
 
 Run: python benchmarks/bench_generalisation.py [--models vgmnet,score] [--buildings orebro]
      [--epochs 12] [--epoch-size 6000] [--max-train N] [--retrain] [--second-look 4]
