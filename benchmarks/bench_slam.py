@@ -14,6 +14,7 @@ vgmnet validator and ``--robust none``:
   false loop closures each, scored against the simulator's TRUEPOS.
 
 Run: python benchmarks/bench_slam.py [--logs intel,office-1,...] [--nudge 1,2] [--list]
+     [--model MODEL.pt]
 
 ``--nudge SEEDS`` runs each row again per seed with its odometry nudged by noise of σ 1e-9
 (``nudged_slam.py``, the size of another machine's rounding) and adds the range of the
@@ -77,7 +78,9 @@ def _simulated(name: str) -> Path:
     return log
 
 
-def arguments(name: str, json_path: Path, pictures: bool = True) -> list[str | Path]:
+def arguments(
+    name: str, json_path: Path, pictures: bool = True, model: Path | None = None
+) -> list[str | Path]:
     data = datasets_dir()
     if name == "intel":
         args: list[str | Path] = [
@@ -91,6 +94,8 @@ def arguments(name: str, json_path: Path, pictures: bool = True) -> list[str | P
         args = [_simulated(name), "--inject-false-loops", "10", "--seed", name.rsplit("-")[-1]]
     if name in PICTURES and pictures:
         args += ["--map-png", OUT / f"maps-{name}", "--resolution", "0.1"]
+    if model is not None:
+        args += ["--model", model]
     return [*args, "--robust", "none", "--json", json_path]
 
 
@@ -98,9 +103,9 @@ def json_path(name: str, nudge: int | None = None) -> Path:
     return OUT / (f"{name}.json" if nudge is None else f"{name}-nudge{nudge}.json")
 
 
-def run(name: str, nudge: int | None = None) -> dict:
+def run(name: str, nudge: int | None = None, model: Path | None = None) -> dict:
     """One row's run; with ``nudge``, its odometry nudged by rounding-level noise of that
-    seed (``nudged_slam.py``)."""
+    seed (``nudged_slam.py``); with ``model``, that checkpoint as the validator."""
     path = json_path(name, nudge)
     if nudge is None:
         command = [sys.executable, "-m", "vgm_studio.tools.cmd"]
@@ -109,7 +114,7 @@ def run(name: str, nudge: int | None = None) -> dict:
     start = time.perf_counter()
     cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
     proc = subprocess.run(
-        [*command, "slam", *map(str, arguments(name, path, pictures=nudge is None))],
+        [*command, "slam", *map(str, arguments(name, path, nudge is None, model))],
         capture_output=True,
         text=True,
     )
@@ -225,12 +230,21 @@ def main() -> None:
         "noise of σ 1e-9 (nudged_slam.py) and add the range of the after error.",
     )
     parser.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        help="A vgmnet checkpoint to run as the validator instead of the bundled one (a model "
+        "of the same accuracy can still move a large building's run: BENCHMARKS.md, session 15).",
+    )
+    parser.add_argument(
         "--from-json",
         action="store_true",
         help="Print the table from the rows' JSON in build/slam (runs made earlier, e.g. in "
         "parallel) instead of running them.",
     )
     args = parser.parse_args()
+    if args.model is not None and not args.model.is_file():
+        raise SystemExit(f"--model: {args.model}: no such file")
     if args.list:
         print("\n".join(rows_known()))
         return
@@ -251,12 +265,13 @@ def main() -> None:
             paths = [json_path(name, seed) for seed in seeds]
             nudged[name] = [json.loads(p.read_text()) for p in paths if p.exists()]
         else:
-            d = run(name)
-            nudged[name] = [run(name, seed) for seed in seeds]
+            d = run(name, model=args.model)
+            nudged[name] = [run(name, seed, args.model) for seed in seeds]
         results[name] = d
         rows.append(row(name, d, nudged[name] if seeds else None))
         print(f"{name}: {' | '.join(rows[-1][1:])}", file=sys.stderr, flush=True)
-    print("# vgm-studio slam, --validator vgmnet (bundled), --robust none; whole runs on 2 cores")
+    validator = f"--model {args.model}" if args.model else "(bundled)"
+    print(f"# vgm-studio slam, --validator vgmnet {validator}, --robust none; 2 cores")
     print(f"# {machine()}")
     header = [
         "log",
