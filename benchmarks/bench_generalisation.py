@@ -148,7 +148,8 @@ def _fold_rows(
     rows = []
     for model in models:
         # A grid other than the paper's is in the name, so fold models on both grids are kept.
-        grid = f"-cell{args.cell:g}" if model == "vgmnet" and args.cell != 0.05 else ""
+        paper = VGMParams().resolution
+        grid = f"-cell{args.cell:g}" if model == "vgmnet" and args.cell != paper else ""
         out = BUILD / "folds" / f"{fold.held_out}-{model}{grid}.pt"
         out.parent.mkdir(parents=True, exist_ok=True)  # a fresh clone has no build/ yet
         epochs, epoch_size = _recipe(model)
