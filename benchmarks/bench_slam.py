@@ -14,7 +14,12 @@ vgmnet validator and ``--robust none``:
   false loop closures each, scored against the simulator's TRUEPOS.
 
 Run: python benchmarks/bench_slam.py [--logs intel,office-1,...] [--nudge 1,2] [--list]
-     [--model MODEL.pt]
+     [--model MODEL.pt | --held-out FOLDS]
+
+``--held-out FOLDS`` runs each real building with the validator that never saw it: the
+leave-one-building-out fold model ``FOLDS/<building>-vgmnet.pt`` that
+``bench_generalisation.py`` trains (``build/edges/folds``). The bundled model has seen every
+building of the table; this is the SLAM run as it goes on a building that is not in it.
 
 ``--nudge SEEDS`` runs each row again per seed with its odometry nudged by noise of σ 1e-9
 (``nudged_slam.py``, the size of another machine's rounding) and adds the range of the
@@ -97,6 +102,16 @@ def arguments(
     if model is not None:
         args += ["--model", model]
     return [*args, "--robust", "none", "--json", json_path]
+
+
+def validator_for(name: str, model: Path | None, held_out: Path | None) -> Path | None:
+    """The row's validator checkpoint: its building's fold model where ``held_out`` has one,
+    else ``model`` (None: the bundled one)."""
+    if held_out is not None:
+        fold = held_out / f"{name}-vgmnet.pt"
+        if fold.is_file():
+            return fold
+    return model
 
 
 def json_path(name: str, nudge: int | None = None) -> Path:
@@ -242,9 +257,20 @@ def main() -> None:
         help="Print the table from the rows' JSON in build/slam (runs made earlier, e.g. in "
         "parallel) instead of running them.",
     )
+    parser.add_argument(
+        "--held-out",
+        type=Path,
+        default=None,
+        metavar="FOLDS",
+        help="A folder of leave-one-building-out fold models (bench_generalisation.py writes "
+        "build/edges/folds): each real building runs with FOLDS/<building>-vgmnet.pt, the "
+        "validator that never saw it; rows without one run with --model or the bundled one.",
+    )
     args = parser.parse_args()
     if args.model is not None and not args.model.is_file():
         raise SystemExit(f"--model: {args.model}: no such file")
+    if args.held_out is not None and not args.held_out.is_dir():
+        raise SystemExit(f"--held-out: {args.held_out}: no such folder")
     if args.list:
         print("\n".join(rows_known()))
         return
@@ -265,12 +291,15 @@ def main() -> None:
             paths = [json_path(name, seed) for seed in seeds]
             nudged[name] = [json.loads(p.read_text()) for p in paths if p.exists()]
         else:
-            d = run(name, model=args.model)
-            nudged[name] = [run(name, seed, args.model) for seed in seeds]
+            model = validator_for(name, args.model, args.held_out)
+            d = run(name, model=model)
+            nudged[name] = [run(name, seed, model) for seed in seeds]
         results[name] = d
         rows.append(row(name, d, nudged[name] if seeds else None))
         print(f"{name}: {' | '.join(rows[-1][1:])}", file=sys.stderr, flush=True)
     validator = f"--model {args.model}" if args.model else "(bundled)"
+    if args.held_out:
+        validator = f"held out ({args.held_out}/<building>-vgmnet.pt), else {validator}"
     print(f"# vgm-studio slam, --validator vgmnet {validator}, --robust none; 2 cores")
     print(f"# {machine()}")
     header = [

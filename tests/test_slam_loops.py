@@ -8,6 +8,7 @@ from functools import partial
 
 import numpy as np
 import pytest
+from scipy.stats import chi2
 
 from vgm_studio.core import se2
 from vgm_studio.graph.metrics import RelationSampling, reference_relations, relation_errors
@@ -173,6 +174,37 @@ def test_a_group_of_agreeing_loops_outvotes_a_drifted_estimate(weight):
     ]
     flags = consistent(loops, estimate, graph, ConsistencyConfig(estimate_weight=weight))
     assert flags.all()
+
+
+def _drifted_by(truth: np.ndarray, graph: UncertaintyGraph, fit: float) -> np.ndarray:
+    """The estimate moved rigidly after keyframe 60 so that a loop a → a + 90 of ``truth``
+    lies ``fit`` (squared Mahalanobis, the graph's σ and LOOP_COV's) from it."""
+    rel = graph.relative([0], len(truth))[0]
+    sigma = math.sqrt(rel.position_var[90] + (LOOP_COV[0, 0] + LOOP_COV[1, 1]) / 2)
+    estimate = truth.copy()
+    estimate[60:, 0] += math.sqrt(fit) * sigma
+    return estimate
+
+
+def test_a_run_of_loops_just_past_the_estimate_gate_outvotes_it_and_a_gross_one_never():
+    truth = ring()
+    graph = chain(truth, STEP_COV * 100)  # the same σ at every loop of the ring
+    config = ConsistencyConfig()
+    gate = float(chi2.ppf(config.probability, 3))
+    loops = [
+        Loop(a, a + 90, se2.between(truth[a], truth[a + 90]), LOOP_COV) for a in range(0, 24, 2)
+    ]
+    just_past = _drifted_by(truth, graph, 2 * gate)  # within the widened gate (4x)
+    assert consistent(loops, just_past, graph, config).all()
+    few = loops[: config.likely_weight]
+    assert not consistent(few, just_past, graph, config).any()
+    assert consistent(loops[: config.likely_weight + 1], just_past, graph, config).all()
+    # A corridor matched back to front lies tens of σ off: no group outvotes that.
+    gross = _drifted_by(truth, graph, 6 * gate)
+    assert not consistent(loops, gross, graph, config).any()
+    # With no doubt allowed, the estimate vetoes the run just past its gate too.
+    strict = ConsistencyConfig(overconfidence=1.0)
+    assert not consistent(loops, just_past, graph, strict).any()
 
 
 def test_a_loop_that_moves_the_map_past_the_drift_needs_a_group_that_agrees():

@@ -202,10 +202,17 @@ class ConsistencyConfig:
     Attributes:
         enabled: Run the check (off: every loop the validator kept goes in).
         probability: The χ²(3) gate of a cycle is its quantile at this probability.
-        estimate_weight: The running estimate counts as this many loops in the vote. Its
-            covariance is the graph's own (wide) one, so by default it vetoes what the graph
-            is sure of: a group of aliased loops (a corridor matched one door along, a
-            symmetric hall matched to its mirror) agrees with itself and would outvote it.
+        estimate_weight: The running estimate counts as this many loops for the loops within
+            its widened gate (``overconfidence``). Its covariance is the graph's own (wide)
+            one, so by default it vetoes what the graph is sure of: a group of aliased loops
+            (a corridor matched one door along or back to front, a symmetric hall matched to
+            its mirror) agrees with itself and would outvote it.
+        likely_weight: …and as this many for the loops within its gate: a run of more agreeing
+            loops than this (beyond those the gate holds) just past the gate outvotes it.
+        overconfidence: How many times its σ the estimate may be wrong by, without a gross
+            error: the graph's σ comes from the matchers' covariances, which a wrong match
+            kept at a tight covariance makes too small. Loops the gate of the σ widened this
+            much cannot explain are vetoed however many agree.
         min_support: A loop that moves the map by more than the scan matchers drift, or one
             from place recognition, is kept only in a group of more than this many agreeing
             loops near it (itself counted; 0: alone too; see ``support_sigma``), and only
@@ -223,6 +230,8 @@ class ConsistencyConfig:
     enabled: bool = True
     probability: float = 0.99
     estimate_weight: int = 1000
+    likely_weight: int = 3
+    overconfidence: float = 2.0
     min_support: int = 1
     support_sigma: float = 0.5
 
