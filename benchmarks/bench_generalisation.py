@@ -33,14 +33,17 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any
 
+import numpy as np
 from _common import RGB_CPU_RECIPE, datasets_dir, machine, pin_to_cores, table
 from edge_sets import BUILD, training_edges
 from folds import Building, make_folds
+from numpy.typing import NDArray
 from recalibrate import recalibrate
 
 MODELS = ("vgmnet", "rgb-baseline", "score")
+# Per (building, model): which of the building's test loops the model judged right.
+Judged = dict[tuple[str, str], NDArray[np.bool_]]
 PRECISION = 0.99
 # Epochs and draws per epoch of a fold model unless --epochs/--epoch-size say otherwise:
 # the recipes of the Intel table (bench_models.py on a CPU), so a fold's models are trained
@@ -134,7 +137,7 @@ def _row(building: str, model: str, labels, probs, checkpoint, seconds: float) -
 
 
 def _fold_rows(
-    fold, data, origin: list[str], models: list[str], args, right: dict[tuple[str, str], Any]
+    fold, data, origin: list[str], models: list[str], args, right: Judged
 ) -> list[list[str]]:
     """Trains each model on the fold's training files and tests it on the held-out loops;
     ``right`` gets, per (building, model), which test pairs the model judged right."""
@@ -232,7 +235,7 @@ def main() -> None:
     data = read_labelled(files, progress=False)
     # Which file each edge came from: read_labelled keeps the files' order and each file's.
     origin = [f["path"] for f in data.files for _ in range(f["used"])]
-    right: dict[tuple[str, str], Any] = {}
+    right: Judged = {}
     rows = [row for fold in folds for row in _fold_rows(fold, data, origin, models, args, right)]
     print(
         "\n# leave-one-building-out, loops of each held-out building; epochs × draws per fold "
@@ -273,7 +276,7 @@ def _summary(rows: list[list[str]], models: list[str]) -> None:
         print(f"vgmnet ahead of rgb-baseline on accuracy: {ahead} of {len(pairs)} buildings")
 
 
-def _paired(right: dict[tuple[str, str], Any]) -> None:
+def _paired(right: Judged) -> None:
     """Per building, the loops only ``vgmnet`` or only ``rgb-baseline`` judged right, and
     whether that split is more than chance (exact McNemar test): on a building of 50 loops
     one pair moves accuracy by 0.02."""
