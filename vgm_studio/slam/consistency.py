@@ -86,8 +86,8 @@ def consistent(
     rel = dict(zip(ends, graph.relative(ends, len(poses)), strict=True))
     gate = float(chi2.ppf(config.probability, 3))
     votes = nx.Graph()
-    # A loop weighs 2 and each vote of the estimate one more than its loops': a tie goes to
-    # the estimate, never to whichever clique networkx finds first.
+    # A loop weighs 2 and a vote of w loops 2w + 1: a group of loops can never tie with the
+    # estimate, which would leave the choice to whichever clique networkx happens to find.
     votes.add_node(_SURE, weight=2 * config.estimate_weight + 1)
     votes.add_node(_LIKELY, weight=2 * config.likely_weight + 1)
     votes.add_edge(_SURE, _LIKELY)
