@@ -149,9 +149,9 @@ def _fold_rows(
     test = subset(data, origin, [fold.test])
     training = subset(data, origin, fold.train)
     rows = []
+    paper = VGMParams().resolution
     for model in models:
         # A grid other than the paper's is in the name, so fold models on both grids are kept.
-        paper = VGMParams().resolution
         grid = f"-cell{args.cell:g}" if model == "vgmnet" and args.cell != paper else ""
         out = BUILD / "folds" / f"{fold.held_out}-{model}{grid}.pt"
         out.parent.mkdir(parents=True, exist_ok=True)  # a fresh clone has no build/ yet
@@ -166,11 +166,11 @@ def _fold_rows(
             hyper={"figures": True, "spread": True} if model == "vgmnet" else {},
             vgm=VGMParams(resolution=args.cell) if model == "vgmnet" else VGMParams(),
         )
+        kept = load_checkpoint(out) if out.exists() else None
         # A fold model on other VGMs (another --cell) is trained again, not reused.
-        stale = out.exists() and load_checkpoint(out).vgm != config.vgm
-        if args.retrain or stale or not out.exists():
+        if args.retrain or kept is None or kept.vgm != config.vgm:
             train(training, config, out, progress=False, log=lambda _line: None)
-        elif "calibration_edges" not in load_checkpoint(out).training:
+        elif "calibration_edges" not in kept.training:
             print(recalibrate(out, training), flush=True)  # trained before the rule
         checkpoint = load_checkpoint(out)
         start = time.perf_counter()
