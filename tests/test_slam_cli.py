@@ -59,6 +59,7 @@ def runs(office, tmp_path_factory) -> dict[str, dict]:
             extra = ["--consistency", "none"]
         if validator == "vgmnet":
             extra = ["--map-png", out / "maps", "--record", out / "run.rrd"]
+            extra += ["--loops-out", out / "loops.jsonl"]
         run(
             log,
             "--validator", validator,
@@ -98,6 +99,42 @@ def test_validation_rejects_injected_loops_and_lowers_the_relation_error(runs):
         assert doc["after"]["trans_mean"] < doc["odometry"]["trans_mean"]
         assert doc["after"]["trans_mean"] < doc["before"]["trans_mean"]
     assert ref["after"]["trans_mean"] < 0.05
+
+
+def test_loops_out_holds_every_matched_loop_labelled_by_the_reference(office, runs):
+    from vgm_studio.matching.edges import read_edges
+    from vgm_studio.model.training import read_labelled
+
+    doc, path = runs["vgmnet"], runs["_out"]["path"] / "loops.jsonl"
+    edges = read_edges(path)
+    log = open_log(office[0])
+    ref = log.reference_poses()
+    assert ref is not None
+    decided = [e.match["slam"] for e in edges]
+    # Every loop the run kept is in the file (no injected loop was kept), and the file holds
+    # the rejected ones too.
+    assert sum(d["kept"] for d in decided) == doc["loops_kept"] >= 20
+    assert len(edges) > doc["loops_kept"]
+    assert not any(d["source"] == "injected" for d in decided)
+    for e, d in zip(edges, decided, strict=True):
+        # Log scans, not keyframe indices, and the reference the label was measured on.
+        assert 0 <= e.a < e.b < len(log) and d["keyframes"][0] < d["keyframes"][1]
+        np.testing.assert_allclose(e.reference, se2.between(ref[e.a], ref[e.b]), atol=1e-9)
+        assert e.label in ("success", "failure", "ambiguous") and e.kind == "loop"
+        assert e.params["read"]["fov_deg"] == 180.0
+    pairs = list(zip(edges, decided, strict=True))
+    kept = [e for e, d in pairs if d["kept"]]
+    # The run keeps no false loop; a few kept ones are a little looser than a success label
+    # (0.1 m), as loops judged by their trail's overlap may be.
+    for e in kept:
+        xy, theta = se2.pose_error(e.reference, e.estimate)
+        assert xy < 0.5 and np.degrees(theta) < 3.0, (e.a, e.b, xy, theta)
+    assert sum(e.label == "success" for e in kept) >= 0.8 * len(kept)
+    # What the validator rejected holds failures: what a validator learns from.
+    assert any(e.label == "failure" and not d["validated"] for e, d in pairs)
+    # A file `vgm-studio train` reads: each labelled loop's VGM made from the log's scans.
+    data = read_labelled([path], progress=False)
+    assert len(data.samples) == sum(e.label in ("success", "failure") for e in edges)
 
 
 def test_maps_are_written_and_the_validated_one_is_the_sharper(runs):
@@ -181,6 +218,8 @@ def test_bad_inputs_end_as_one_line(office, tmp_path, capsys):
         ((log, "--relations", log), f"vgm-studio: error: {log}: is not a Freiburg relations file"),
         ((log, "--validator", "score"), "vgm-studio: error: --validator score needs --model"),
         ((tmp_path / "none.log",), f"vgm-studio: error: {tmp_path / 'none.log'}: no such file"),
+        # Said before the run, not after minutes of it.
+        ((log, "--loops-out", tmp_path), f"vgm-studio: error: {tmp_path}: is a folder"),
         # The model is checked before the log is read (seconds, on a large log).
         (
             (tmp_path / "none.log", "--model", tmp_path / "none.pt"),

@@ -21,7 +21,7 @@ from tqdm import tqdm
 from vgm_studio.core import se2
 from vgm_studio.datasets.relations import MatchedRelation
 from vgm_studio.datasets.scans import Scan, ScanLog
-from vgm_studio.matching.edges import Edge, EdgeKind, edge_id
+from vgm_studio.matching.edges import Edge, EdgeKind, Label, edge_id
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.matching.odometry import lidar_odometry
 from vgm_studio.matching.reference_labels import (
@@ -246,12 +246,9 @@ def _matched(
     figures = result.figures()
     label: Literal["success", "failure", "ambiguous"] | None = None
     if p.reference is not None:
-        label = reference_label(p.reference, estimate, thresholds)
-        if label == "failure" and thresholds.check_reference:
-            check = _reference_check(a, b, p.reference, result.estimate, matcher, thresholds)
+        label, check = checked_label(a, b, p.reference, result.estimate, matcher, thresholds)
+        if check is not None:
             figures["reference_check"] = check
-            if check["contradicted"]:
-                label = "ambiguous"
     return Edge(
         # A scan pair matched under another laser mount is another edge.
         edge_id=edge_id(
@@ -271,6 +268,24 @@ def _matched(
         label=label,
         params=recorded,
     )
+
+
+def checked_label(
+    a: Scan,
+    b: Scan,
+    reference: NDArray[np.float64],
+    estimate: NDArray[np.float64],
+    matcher: ScanMatcher,
+    thresholds: LabelThresholds,
+) -> tuple[Label, dict[str, Any] | None]:
+    """The reference label of a matched pair, and the reference check's figures where a
+    failure was checked against the scans (``thresholds.check_reference``): a failure the
+    scans contradict is ``ambiguous``."""
+    label = reference_label(reference, estimate, thresholds)
+    if label != "failure" or not thresholds.check_reference:
+        return label, None
+    check = _reference_check(a, b, reference, estimate, matcher, thresholds)
+    return ("ambiguous" if check["contradicted"] else label), check
 
 
 def _reference_check(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections import Counter
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -15,10 +16,12 @@ from vgm_studio.errors import InputError
 from vgm_studio.graph.metrics import RelationErrors
 from vgm_studio.maps.png import write_maps
 from vgm_studio.matching.agreement import check_agreement, disagreement_warning, motions_of
+from vgm_studio.matching.edges import write_edges
 from vgm_studio.model.registry import BUNDLED_MODEL, VALIDATOR_MODELS
 from vgm_studio.recording import write_recording
 from vgm_studio.services import Say, Voice
 from vgm_studio.slam.config import SlamConfig
+from vgm_studio.slam.loop_edges import loop_edges
 from vgm_studio.slam.pipeline import SlamResult, run_slam
 from vgm_studio.slam.report import (
     LOOP_COLOURS,
@@ -41,12 +44,14 @@ class SlamOutputs:
         maps: A folder for the odometry, before and after maps (and all three) as PNG.
         record: A rerun recording.
         spawn: Open the rerun viewer on the run.
+        loops: An edges file of the loops the run matched (``slam.loop_edges``).
     """
 
     json: Path | None = None
     maps: Path | None = None
     record: Path | None = None
     spawn: bool = False
+    loops: Path | None = None
 
 
 def validator_model(validator: str, model: Path | None) -> Path | None:
@@ -111,12 +116,28 @@ def run_slam_command(
     if errors is not None:
         say(table(errors))
     _write_outputs(source, result, errors, config, outputs, say)
+    if outputs.loops is not None:
+        _write_loops(outputs.loops, source, result, say)
     seconds = time.perf_counter() - start
     if outputs.json is not None:
         settings = json.loads(json.dumps(asdict(config), default=str))
         _write_json(outputs.json, summary(result, errors, settings, seconds))
         say(f"wrote {outputs.json}")
     say(f"done in {seconds:.1f} s")
+
+
+def _write_loops(path: Path, source: LogSource, result: SlamResult, say: Say) -> None:
+    edges = loop_edges(source.log, result, source.params)
+    try:
+        write_edges(path, edges)
+    except OSError as exc:
+        raise InputError(path, f"cannot write ({exc.strerror or exc})") from None
+    labels = Counter(e.label or "unlabelled" for e in edges)
+    say(
+        f"wrote {len(edges)} loops to {path} ("
+        + ", ".join(f"{n} {label}" for label, n in sorted(labels.items()))
+        + ")"
+    )
 
 
 def _write_outputs(

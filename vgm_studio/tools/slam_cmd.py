@@ -130,6 +130,14 @@ def slam(
         typer.Option(metavar="OUT.rrd", help="Write a rerun recording (no viewer needed)."),
     ] = None,
     spawn: Annotated[bool, typer.Option(help="Open the rerun viewer on the run.")] = False,
+    loops_out: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="OUT.jsonl",
+            help="Write the loops the run matched as an edges file, with its decisions and "
+            "reference labels: open it in the studio, or train on it.",
+        ),
+    ] = None,
     keyframe_distance: Annotated[float, positive("Keyframe every this many metres (> 0).")] = 0.5,
     keyframe_angle: Annotated[float, positive("…or this many degrees (> 0).")] = 20.0,
     loop_radius: Annotated[
@@ -165,7 +173,7 @@ def slam(
         ValidationConfig,
     )
 
-    for out in (json_out, record):
+    for out in (json_out, record, loops_out):
         if out is not None:
             writable_file(out)
     if map_png is not None:
@@ -198,6 +206,6 @@ def slam(
         reference=reference,
         relations=relations,
         join=JoinOptions(time_tolerance, time_offset),
-        outputs=SlamOutputs(json_out, map_png, record, spawn),
+        outputs=SlamOutputs(json_out, map_png, record, spawn, loops_out),
         voice=Voice(typer.echo, lambda line: typer.echo(line, err=True)),
     )
