@@ -169,7 +169,8 @@ def _nudged(runs: list[dict]) -> str:
 
 def row(name: str, d: dict, nudged: list[dict] | None = None) -> list[str]:
     if "error" in d:
-        return [name, d["error"][:60], *[""] * (9 if nudged is None else 10)]
+        # The error in the "after" column, the other eight (nine) left blank.
+        return [name, d["error"][:60], *[""] * (8 if nudged is None else 9)]
     by = d["loops_by_source"]
     false = (
         f"{d['injected_false_loops_kept']}/{d['injected_false_loops']}" if by["injected"] else ""
