@@ -79,7 +79,13 @@ def test_paired_table_says_which_leads_chance_can_explain(monkeypatch, capsys):
         ("score-only", "score"): [True],
     }
     bench_generalisation._paired(right)
-    rows = {line.split("|")[1].strip(): line for line in capsys.readouterr().out.splitlines()}
+    lines = capsys.readouterr().out.splitlines()
+    rows = {line.split("|")[1].strip(): line for line in lines if line.startswith("|")}
+    # The summary counts the same arrays: one lead beyond chance, one trail within it.
+    assert lines[-1] == (
+        "vgmnet ahead of rgb-baseline on accuracy: 1 of 3 buildings (1 beyond chance); "
+        "behind beyond chance on 0"
+    )
     assert "| 10 " in rows["big"] and "0.002" in rows["big"] and "chance" not in rows["big"]
     assert rows["big"].rstrip(" |").endswith("vgmnet")
     assert "level" in rows["even"] and "1.000" in rows["even"]
