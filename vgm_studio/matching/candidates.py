@@ -278,35 +278,24 @@ def checked_label(
     matcher: ScanMatcher,
     thresholds: LabelThresholds,
 ) -> tuple[Label, dict[str, Any] | None]:
-    """The reference label of a matched pair, and the reference check's figures where a
-    failure was checked against the scans (``thresholds.check_reference``): a failure the
-    scans contradict is ``ambiguous``."""
+    """The reference label of a matched pair, and where a failure was checked against the
+    scans (``thresholds.check_reference``) the check's JSON-ready figures: the matcher
+    started at the reference, and whether the scans contradict the reference
+    (``reference_labels.contradicts_reference``). A failure they contradict is ``ambiguous``."""
     label = reference_label(reference, estimate, thresholds)
     if label != "failure" or not thresholds.check_reference:
         return label, None
-    check = _reference_check(a, b, reference, estimate, matcher, thresholds)
-    return ("ambiguous" if check["contradicted"] else label), check
-
-
-def _reference_check(
-    a: Scan,
-    b: Scan,
-    reference: NDArray[np.float64],
-    estimate: NDArray[np.float64],
-    matcher: ScanMatcher,
-    thresholds: LabelThresholds,
-) -> dict[str, Any]:
-    """The matcher started at the reference, and whether the scans contradict the reference
-    (``reference_labels.contradicts_reference``), as JSON-ready figures."""
     reference = np.asarray(reference, dtype=np.float64)
     rest = matcher.match(a, b, reference).estimate
     figures = [matcher.judge(a, b, pose) for pose in (reference, rest)]
     at_reference, at_rest = ((0.0, 0.0) if f is None else (f.inlier_ratio, f.fit) for f in figures)
-    return {
+    contradicted = contradicts_reference(estimate, rest, at_reference, at_rest, thresholds)
+    check = {
         "from_reference": [float(v) for v in rest],
         "inlier_ratio_at_reference": at_reference[0],
         "inlier_ratio_from_reference": at_rest[0],
         "fit_at_reference": at_reference[1],
         "fit_from_reference": at_rest[1],
-        "contradicted": contradicts_reference(estimate, rest, at_reference, at_rest, thresholds),
+        "contradicted": contradicted,
     }
+    return ("ambiguous" if contradicted else label), check
