@@ -158,6 +158,9 @@ class RunningEstimate:
 
     Loop candidates are searched in this estimate, so closing one loop corrects where the
     next ones are looked for.
+
+    Attributes:
+        restarts: 1 once iSAM2 has been rebuilt with QR factorisation (see ``update``), else 0.
     """
 
     def __init__(self, origin: NDArray[np.float64], config: GraphConfig) -> None:
@@ -165,13 +168,15 @@ class RunningEstimate:
         # GNC has no incremental form; Huber stands in for it while the front end runs.
         self._robust: RobustName = "none" if config.robust == "none" else "huber"
         self._isam = gtsam.ISAM2(gtsam.ISAM2Params())
-        self._count = 0
+        # Every factor given so far, for a batch re-solve when iSAM2 gives up (see ``update``).
+        self._factors = gtsam.NonlinearFactorGraph()
         self._pending_graph = gtsam.NonlinearFactorGraph()
         self._pending_values = gtsam.Values()
         self._pending_graph.add(gtsam.PriorFactorPose2(0, _pose(origin), _PRIOR))
         self._pending_values.insert(0, _pose(origin))
         self._count = 1
         self._poses = np.asarray(origin, dtype=np.float64).reshape(1, 3)
+        self.restarts = 0
 
     def __len__(self) -> int:
         return self._count
@@ -191,15 +196,39 @@ class RunningEstimate:
         )
 
     def update(self, extra_iterations: int = 0) -> NDArray[np.float64]:
-        """Folds the pending keyframes and edges in; returns the (N, 3) current estimate."""
-        self._isam.update(self._pending_graph, self._pending_values)
-        # A loop closure moves many poses at once; a few more relinearisations settle it.
-        for _ in range(extra_iterations):
-            self._isam.update()
+        """Folds the pending keyframes and edges in; returns the (N, 3) current estimate.
+
+        gtsam's Cholesky calls a pivot indeterminate when it is under 2⁻²⁴ of the variable's
+        own information. iSAM2 eliminates the newest keyframe last, so its pivot is its
+        marginal information: a long run of weak odometry (σ ≥ tens of metres at the end
+        against centimetres per edge) trips that check although the system is sound. The
+        solver is then rebuilt on every factor with QR, which has no such check, and stays so.
+        """
+        self._factors.push_back(self._pending_graph)
+        try:
+            self._isam.update(self._pending_graph, self._pending_values)
+            # A loop closure moves many poses at once; a few more relinearisations settle it.
+            for _ in range(extra_iterations):
+                self._isam.update()
+            estimate = self._isam.calculateEstimate()
+        except RuntimeError as exc:
+            if "Indeterminate" not in str(exc) or self.restarts:
+                raise
+            estimate = self._restart_with_qr(extra_iterations)
         self._pending_graph = gtsam.NonlinearFactorGraph()
         self._pending_values = gtsam.Values()
-        self._poses = _poses(self._isam.calculateEstimate(), self._count)
+        self._poses = _poses(estimate, self._count)
         return self._poses
+
+    def _restart_with_qr(self, extra_iterations: int) -> gtsam.Values:
+        params = gtsam.ISAM2Params()
+        params.setFactorization("QR")
+        self._isam = gtsam.ISAM2(params)
+        self._isam.update(self._factors, _values(self._poses))
+        for _ in range(extra_iterations):
+            self._isam.update()
+        self.restarts += 1
+        return self._isam.calculateEstimate()
 
     @property
     def poses(self) -> NDArray[np.float64]:

@@ -37,6 +37,8 @@ class SlamResult:
         after: The graph with the validated edges, optimised.
         threshold: The model's p(success) threshold (NaN for ``none`` and ``reference``).
         seconds: Wall time per stage.
+        isam2_restarts: 1 when the running estimate had to rebuild iSAM2 with QR (see
+            ``RunningEstimate.update``), else 0.
     """
 
     keyframes: NDArray[np.int64]
@@ -47,6 +49,7 @@ class SlamResult:
     after: OptimizeResult
     threshold: float = float("nan")
     seconds: dict[str, float] = field(default_factory=dict)
+    isam2_restarts: int = 0
 
     @property
     def odometry_keyframes(self) -> NDArray[np.float64]:
@@ -191,4 +194,5 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
         after=after,
         threshold=validator.threshold,
         seconds=seconds,
+        isam2_restarts=front.estimate.restarts,
     )

@@ -143,6 +143,7 @@ def summary(
                 "before": int(np.sum(result.before.weights < 0.5)),
                 "after": int(np.sum(result.after.weights < 0.5)),
             },
+            "isam2_restarts": result.isam2_restarts,
             "keyframes": len(result.keyframes),
             "scans": len(result.odometry),
             "seconds": seconds,
@@ -206,4 +207,6 @@ def edge_line(result: SlamResult) -> str:
     )
     if c.injected:
         text += f"; injected false loops: {c.injected_kept} of {c.injected} kept"
+    if result.isam2_restarts:
+        text += "; iSAM2 rebuilt with QR once (gtsam called the long chain indeterminate)"
     return text
