@@ -54,6 +54,15 @@ def test_round_trip(tmp_path):
     assert math.isnan(back[0].timestamp_b)
 
 
+def test_writing_onto_a_folder_is_one_line_and_leaves_the_folder_clean(tmp_path):
+    folder = tmp_path / "edges.jsonl"
+    folder.mkdir()
+    with pytest.raises(InputError) as err:
+        write_edges(folder, [make_edge()])
+    assert str(err.value).startswith(f"{folder}: cannot write")
+    assert list(tmp_path.iterdir()) == [folder] and not any(folder.iterdir())
+
+
 @pytest.mark.parametrize(
     ("text", "message"),
     [

@@ -117,8 +117,19 @@ def _finite_or_none(value: float) -> float | None:
 
 
 def write_edges(path: str | Path, edges: Iterable[Edge]) -> int:
-    """Writes edges as JSONL atomically (a crash never leaves half a file). Returns the count."""
+    """Writes edges as JSONL atomically (a crash never leaves half a file). Returns the count.
+
+    Raises:
+        InputError: ``path`` cannot be written (a folder, no permission, a full disk).
+    """
     path = Path(path)
+    try:
+        return _write_atomically(path, edges)
+    except OSError as exc:
+        raise InputError(path, f"cannot write ({exc.strerror or exc})") from None
+
+
+def _write_atomically(path: Path, edges: Iterable[Edge]) -> int:
     path.parent.mkdir(parents=True, exist_ok=True)
     count = 0
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)

@@ -9,7 +9,6 @@ from pathlib import Path
 
 from vgm_studio.datasets import ReadOptions
 from vgm_studio.datasets.source import JoinOptions, read_source
-from vgm_studio.errors import InputError
 from vgm_studio.matching.agreement import disagreement_warning, edges_agreement
 from vgm_studio.matching.candidates import CandidateConfig, make_candidates
 from vgm_studio.matching.edges import Edge, write_edges
@@ -79,10 +78,7 @@ def make_edge_file(
         source.log, ScanMatcher(), config, thresholds, source.relations, source.params
     )
     seconds = time.perf_counter() - start
-    try:
-        write_edges(out, edges)
-    except OSError as exc:
-        raise InputError(out, f"cannot write ({exc.strerror or exc})") from None
+    write_edges(out, edges)
     disagreement = disagreement_warning(source.log, edges_agreement(source.log, edges))
     if disagreement is not None:
         warn(disagreement)

@@ -128,10 +128,7 @@ def run_slam_command(
 
 def _write_loops(path: Path, source: LogSource, result: SlamResult, say: Say) -> None:
     edges = loop_edges(source.log, result, source.params)
-    try:
-        write_edges(path, edges)
-    except OSError as exc:
-        raise InputError(path, f"cannot write ({exc.strerror or exc})") from None
+    write_edges(path, edges)
     labels = Counter(e.label or "unlabelled" for e in edges)
     say(
         f"wrote {len(edges)} loops to {path} ("
