@@ -118,6 +118,19 @@ def json_path(name: str, nudge: int | None = None) -> Path:
     return OUT / (f"{name}.json" if nudge is None else f"{name}-nudge{nudge}.json")
 
 
+def failure(stderr: str) -> str:
+    """The line that says why a run failed: a traceback's exception line (with its message
+    when that starts on the next line, as gtsam's does), else the last line printed."""
+    lines = [line.strip() for line in stderr.strip().splitlines() if line.strip()]
+    for k in range(len(lines) - 1, -1, -1):
+        head, colon, message = lines[k].partition(":")
+        if colon and head.replace(".", "").isidentifier() and head.endswith(("Error", "Exception")):
+            if not message.strip() and k + 1 < len(lines):
+                return f"{head}: {lines[k + 1]}"
+            return lines[k]
+    return lines[-1] if lines else "failed"
+
+
 def run(name: str, nudge: int | None = None, model: Path | None = None) -> dict:
     """One row's run; with ``nudge``, its odometry nudged by rounding-level noise of that
     seed (``nudged_slam.py``); with ``model``, that checkpoint as the validator."""
@@ -137,7 +150,7 @@ def run(name: str, nudge: int | None = None, model: Path | None = None) -> dict:
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu_s = after.ru_utime + after.ru_stime - cpu.ru_utime - cpu.ru_stime
     if proc.returncode:
-        return {"error": proc.stderr.strip().splitlines()[-1] if proc.stderr else "failed"}
+        return {"error": failure(proc.stderr)}
     doc = json.loads(path.read_text())
     doc["wall"] = wall
     doc["cpu"] = cpu_s
