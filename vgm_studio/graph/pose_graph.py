@@ -199,10 +199,11 @@ class RunningEstimate:
         """Folds the pending keyframes and edges in; returns the (N, 3) current estimate.
 
         gtsam's Cholesky calls a pivot indeterminate when it is under 2⁻²⁴ of the variable's
-        own information. iSAM2 eliminates the newest keyframe last, so its pivot is its
-        marginal information: a long run of weak odometry (σ ≥ tens of metres at the end
-        against centimetres per edge) trips that check although the system is sound. The
-        solver is then rebuilt on every factor with QR, which has no such check, and stays so.
+        own information. iSAM2 eliminates the keyframes just touched (the newest, those a new
+        loop joins) last, so their pivots are near their marginal information: after a long
+        run of weak odometry (marginal σ of tens of metres against centimetres per edge) that
+        trips the check although the system is sound. The solver is then rebuilt on every
+        factor with QR, which has no such check, and stays so.
         """
         self._factors.push_back(self._pending_graph)
         try:
