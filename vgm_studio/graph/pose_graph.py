@@ -168,7 +168,7 @@ class RunningEstimate:
         # GNC has no incremental form; Huber stands in for it while the front end runs.
         self._robust: RobustName = "none" if config.robust == "none" else "huber"
         self._isam = gtsam.ISAM2(gtsam.ISAM2Params())
-        # Every factor given so far, for a batch re-solve when iSAM2 gives up (see ``update``).
+        # Every factor given so far, to rebuild iSAM2 from when gtsam gives up (see ``update``).
         self._factors = gtsam.NonlinearFactorGraph()
         self._pending_graph = gtsam.NonlinearFactorGraph()
         self._pending_values = gtsam.Values()
