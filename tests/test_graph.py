@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from importlib.metadata import version
 
 import numpy as np
 import pytest
@@ -101,6 +102,10 @@ def test_running_estimate_agrees_with_the_batch_solution():
     assert np.abs(poses[:, :2] - batch[:, :2]).max() < 1e-3
 
 
+def _gtsam_version() -> tuple[int, ...]:
+    return tuple(int(part) for part in version("gtsam").split(".")[:2] if part.isdigit())
+
+
 def test_running_estimate_survives_gtsam_calling_a_long_weak_chain_indeterminate():
     # 600 m of corridor with one odometry fallback (σθ 10°) every 30 m: the newest keyframe's
     # marginal σ grows to hundreds of metres against 2 cm per edge, and gtsam's Cholesky
@@ -117,7 +122,9 @@ def test_running_estimate_survives_gtsam_calling_a_long_weak_chain_indeterminate
         running.add_edge(step)
         if i % 20 == 0:
             running.update()
-    assert running.restarts == 1, "the chain no longer trips gtsam's check: lengthen it"
+    # The normalised pivot check came with gtsam 4.3; an older gtsam may accept the chain.
+    if _gtsam_version() >= (4, 3):
+        assert running.restarts == 1, "the chain no longer trips gtsam's check: lengthen it"
     assert np.abs(running.update() - truth).max() < 1e-6
     # The rebuilt solver goes on taking keyframes and loops.
     running.add_keyframe(truth[-1] + [1.0, 0.0, 0.0])
