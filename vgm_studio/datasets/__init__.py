@@ -5,9 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from vgm_studio.datasets.carmen import read_carmen
-from vgm_studio.datasets.mount import mount_from_options, with_mount
+from vgm_studio.datasets.mount import mount_from_options
 from vgm_studio.datasets.options import ReadOptions
-from vgm_studio.datasets.scans import Scan, ScanLog
+from vgm_studio.datasets.scans import Scan, ScanLog, with_mount
 from vgm_studio.errors import InputError, require_utf8_path
 
 __all__ = ["ReadOptions", "Scan", "ScanLog", "open_log"]

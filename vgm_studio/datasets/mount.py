@@ -9,19 +9,15 @@ pose moves them into the base frame.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from vgm_studio.core import se2
-
-if TYPE_CHECKING:
-    from vgm_studio.datasets.scans import ScanLog
 
 # A mount closer than this to the base (metres, radians) is the base: edge ids and the
 # printed mount stay as they were for a laser at the base.
@@ -128,42 +124,3 @@ def mount_from_matrix(transform: NDArray[np.float64]) -> LaserMount:
     # scan: its x axis for an upright laser, the same for an upside-down one (roll keeps x).
     yaw = math.atan2(float(r[1, 0]), float(r[0, 0]))
     return LaserMount(float(transform[0, 3]), float(transform[1, 3]), yaw, flipped)
-
-
-def with_mount(
-    log: ScanLog, mount: LaserMount | None, source: str, poses_of_laser: bool
-) -> ScanLog:
-    """The log with every scan placed in the base frame by ``mount``.
-
-    Args:
-        log: The log as read.
-        mount: The laser's mount; None leaves the log as it is.
-        source: Where the mount came from (``/tf_static``, ``--laser-pose`` …), for ``info``.
-        poses_of_laser: The log's poses are of the laser (CARMEN's pose fields), so they are
-            moved to the base (pose ∘ mount⁻¹) and the world stays where the log put it. ROS
-            odometry is of the base already and stays.
-    """
-    if mount is None:
-        return log
-    back = se2.inverse(mount.pose)
-
-    def to_base(pose: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
-        if pose is None or not poses_of_laser:
-            return pose
-        return se2.compose(pose, back)
-
-    scans = [
-        dataclasses.replace(
-            s, mount=mount, odometry=to_base(s.odometry), reference=to_base(s.reference)
-        )
-        for s in log.scans
-    ]
-    return dataclasses.replace(log, scans=scans, mount=mount, mount_source=source)
-
-
-def mount_line(log: ScanLog) -> str:
-    """The mount a log's scans are placed by, and where it came from, for people to read."""
-    source = log.mount_source or "no tf in this log and no --laser-pose"
-    if log.mount is None:
-        return f"at the base ({source})"
-    return f"{log.mount.describe()} ({source})"

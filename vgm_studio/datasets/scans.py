@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -154,3 +154,40 @@ class ScanLog:
         if ra is None or rb is None:
             return None
         return se2.between(ra, rb)
+
+
+def with_mount(
+    log: ScanLog, mount: LaserMount | None, source: str, poses_of_laser: bool
+) -> ScanLog:
+    """The log with every scan placed in the base frame by ``mount``.
+
+    Args:
+        log: The log as read.
+        mount: The laser's mount; None leaves the log as it is.
+        source: Where the mount came from (``/tf_static``, ``--laser-pose`` …), for ``info``.
+        poses_of_laser: The log's poses are of the laser (CARMEN's pose fields), so they are
+            moved to the base (pose ∘ mount⁻¹) and the world stays where the log put it. ROS
+            odometry is of the base already and stays.
+    """
+    if mount is None:
+        return log
+    back = se2.inverse(mount.pose)
+
+    def to_base(pose: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
+        if pose is None or not poses_of_laser:
+            return pose
+        return se2.compose(pose, back)
+
+    scans = [
+        replace(s, mount=mount, odometry=to_base(s.odometry), reference=to_base(s.reference))
+        for s in log.scans
+    ]
+    return replace(log, scans=scans, mount=mount, mount_source=source)
+
+
+def mount_line(log: ScanLog) -> str:
+    """The mount a log's scans are placed by, and where it came from, for people to read."""
+    source = log.mount_source or "no tf in this log and no --laser-pose"
+    if log.mount is None:
+        return f"at the base ({source})"
+    return f"{log.mount.describe()} ({source})"

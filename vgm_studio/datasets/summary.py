@@ -8,8 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from vgm_studio.datasets.mount import mount_line
-from vgm_studio.datasets.scans import ScanLog
+from vgm_studio.datasets.scans import ScanLog, mount_line
 
 
 def summarize(log: ScanLog) -> dict[str, Any]:

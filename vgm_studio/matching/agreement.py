@@ -27,8 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vgm_studio.core import se2
-from vgm_studio.datasets.mount import mount_line
-from vgm_studio.datasets.scans import ScanLog
+from vgm_studio.datasets.scans import ScanLog, mount_line
 from vgm_studio.matching.candidates import select_keyframes
 from vgm_studio.matching.edges import Edge
 from vgm_studio.matching.matcher import ScanMatcher

@@ -6,8 +6,8 @@ import json
 from pathlib import Path
 
 from vgm_studio.datasets import ReadOptions, open_log
-from vgm_studio.datasets.mount import mount_line
 from vgm_studio.datasets.relations import looks_like_relations, read_relations
+from vgm_studio.datasets.scans import mount_line
 from vgm_studio.datasets.source import skipped_lines
 from vgm_studio.datasets.summary import format_summary, summarize
 from vgm_studio.matching.agreement import MIN_EDGES, check_log
