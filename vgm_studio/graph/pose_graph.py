@@ -168,7 +168,9 @@ class RunningEstimate:
         # GNC has no incremental form; Huber stands in for it while the front end runs.
         self._robust: RobustName = "none" if config.robust == "none" else "huber"
         self._isam = gtsam.ISAM2(gtsam.ISAM2Params())
-        # Every factor given so far, to rebuild iSAM2 from when gtsam gives up (see ``update``).
+        # Every factor given so far, to rebuild iSAM2 from when gtsam gives up (see ``update``);
+        # kept here rather than read back from iSAM2, whose own list after a throw is gtsam's
+        # internal state (whole in 4.3, but nothing promises it).
         self._factors = gtsam.NonlinearFactorGraph()
         self._pending_graph = gtsam.NonlinearFactorGraph()
         self._pending_values = gtsam.Values()
@@ -207,28 +209,27 @@ class RunningEstimate:
         """
         self._factors.push_back(self._pending_graph)
         try:
-            self._isam.update(self._pending_graph, self._pending_values)
-            # A loop closure moves many poses at once; a few more relinearisations settle it.
-            for _ in range(extra_iterations):
-                self._isam.update()
-            estimate = self._isam.calculateEstimate()
+            estimate = self._solve(self._pending_graph, self._pending_values, extra_iterations)
         except RuntimeError as exc:
             if "Indeterminate" not in str(exc) or self.restarts:
                 raise
-            estimate = self._restart_with_qr(extra_iterations)
+            params = gtsam.ISAM2Params()
+            params.setFactorization("QR")
+            self._isam = gtsam.ISAM2(params)
+            self.restarts += 1
+            estimate = self._solve(self._factors, _values(self._poses), extra_iterations)
         self._pending_graph = gtsam.NonlinearFactorGraph()
         self._pending_values = gtsam.Values()
         self._poses = _poses(estimate, self._count)
         return self._poses
 
-    def _restart_with_qr(self, extra_iterations: int) -> gtsam.Values:
-        params = gtsam.ISAM2Params()
-        params.setFactorization("QR")
-        self._isam = gtsam.ISAM2(params)
-        self._isam.update(self._factors, _values(self._poses))
+    def _solve(
+        self, factors: gtsam.NonlinearFactorGraph, values: gtsam.Values, extra_iterations: int
+    ) -> gtsam.Values:
+        self._isam.update(factors, values)
+        # A loop closure moves many poses at once; a few more relinearisations settle it.
         for _ in range(extra_iterations):
             self._isam.update()
-        self.restarts += 1
         return self._isam.calculateEstimate()
 
     @property
