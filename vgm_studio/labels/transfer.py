@@ -10,11 +10,10 @@ from __future__ import annotations
 import csv
 import io
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
+from vgm_studio.atomic import write_text_atomically
 from vgm_studio.errors import InputError
 from vgm_studio.labels.schema import escape_cell, parse_label_row, unescape_cell
 from vgm_studio.labels.store import LabelRecord, LabelStore
@@ -92,23 +91,10 @@ def export_labels(store: LabelStore, out: Path) -> int:
             )
         text = buffer.getvalue()
     try:
-        _write_atomically(out, text)
+        write_text_atomically(out, text, newline="")
     except OSError as exc:
         raise InputError(out, f"cannot write here ({exc.strerror or type(exc).__name__})") from None
     return len(rows)
-
-
-def _write_atomically(out: Path, text: str) -> None:
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-            f.write(text)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, out)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _read_text(path: Path, suffix: str) -> str:

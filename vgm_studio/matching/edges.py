@@ -5,13 +5,12 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
-import tempfile
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from vgm_studio.atomic import atomic_path
 from vgm_studio.errors import InputError
 from vgm_studio.matching.edge_schema import json_lines, load_json_line, parse_edge_row
 
@@ -123,26 +122,14 @@ def write_edges(path: str | Path, edges: Iterable[Edge]) -> int:
         InputError: ``path`` cannot be written (a folder, no permission, a full disk).
     """
     path = Path(path)
-    try:
-        return _write_atomically(path, edges)
-    except OSError as exc:
-        raise InputError(path, f"cannot write ({exc.strerror or exc})") from None
-
-
-def _write_atomically(path: Path, edges: Iterable[Edge]) -> int:
-    path.parent.mkdir(parents=True, exist_ok=True)
     count = 0
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
+        with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
             for edge in edges:
                 f.write(json.dumps(edge.to_json(), separators=(",", ":")) + "\n")
                 count += 1
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    except OSError as exc:
+        raise InputError(path, f"cannot write ({exc.strerror or exc})") from None
     return count
 
 

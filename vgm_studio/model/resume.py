@@ -11,7 +11,6 @@ uninterrupted one would have.
 from __future__ import annotations
 
 import hashlib
-import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -19,6 +18,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from vgm_studio.atomic import atomic_path
 from vgm_studio.errors import InputError
 
 
@@ -65,9 +65,8 @@ def run_key(recipe: object, network: str, *arrays: np.ndarray) -> str:
 
 def save_run(path: Path, state: RunState) -> None:
     """Writes ``state`` whole or not at all (a kill mid-write leaves the last one)."""
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(asdict(state), tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        torch.save(asdict(state), tmp)
 
 
 def load_run(path: Path, key: str) -> RunState | None:

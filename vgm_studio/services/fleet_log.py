@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -18,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from vgm_studio.atomic import write_text_atomically
 from vgm_studio.core.hashing import content_hash
 from vgm_studio.datasets import ReadOptions
 from vgm_studio.datasets.manifest import ManifestEntry
@@ -227,6 +227,4 @@ def _finite(value: Any) -> float | None:
 
 def write_json_atomically(path: Path, doc: dict[str, Any]) -> None:
     """Writes to a temporary file beside ``path`` and renames: ``path`` is whole or absent."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}")
-    tmp.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    write_text_atomically(path, json.dumps(doc, indent=2) + "\n")

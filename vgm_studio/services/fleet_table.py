@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+
+from vgm_studio.atomic import atomic_path
 
 TABLE_FILE = "fleet.parquet"
 GRID_FILE = "after-maps.png"
@@ -73,9 +74,8 @@ def write_table(path: Path, rows: list[dict[str, Any]]) -> Path:
     table = pa.Table.from_pylist(
         [{name: row.get(name) for name, _ in _COLUMNS} for row in rows], schema=schema
     )
-    tmp = path.with_name(f".{path.name}.{os.getpid()}")
-    pq.write_table(table, tmp)
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp)
     return path
 
 
@@ -121,9 +121,11 @@ def write_grid(path: Path, rows: list[dict[str, Any]], tile: int = 360) -> Path:
     blank = np.full_like(tiles[0], 255)
     tiles += [blank] * (nrows * cols - len(tiles))
     grid = np.vstack([np.hstack(tiles[i * cols : (i + 1) * cols]) for i in range(nrows)])
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.png")
-    cv2.imwrite(str(tmp), grid)
-    os.replace(tmp, path)
+    ok, png = cv2.imencode(".png", grid)
+    if not ok:
+        raise OSError(f"OpenCV could not encode the {grid.shape} grid as PNG")
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(png.tobytes())
     return path
 
 

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import shutil
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
+from vgm_studio.atomic import atomic_path
 from vgm_studio.errors import InputError
 from vgm_studio.labels.opening import open_store
 from vgm_studio.model.checkpoint import Checkpoint, load_checkpoint
@@ -173,15 +172,8 @@ def _copy_atomically(source: Path, out: Path) -> None:
     """Copies to a temporary file beside ``out``, then renames: ``out`` is whole or untouched."""
     if out.is_dir():
         raise InputError(out, "is a folder; give a file name to write")
-    tmp: str | None = None
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", dir=out.parent)
-        os.close(fd)
-        shutil.copyfile(source, tmp)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, out)
+        with atomic_path(out) as tmp:
+            shutil.copyfile(source, tmp)
     except OSError as exc:
-        if tmp is not None:
-            Path(tmp).unlink(missing_ok=True)
         raise InputError(out, f"cannot write here ({exc.strerror or exc})") from None

@@ -1,0 +1,70 @@
+"""Files written whole or not at all: a temporary file beside the target, then a rename.
+
+A reader (another process, the studio, a resumed run) sees the old file or the new one, never
+half of one, whether the writer raises, is killed or the disk fills.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+
+def _read_umask() -> int:
+    # os.umask can only be read by setting it; done once, at import, before any thread writes.
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_FILE_MODE = 0o666 & ~_read_umask()
+
+
+@contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yields a temporary path beside ``path`` to write; on a clean exit it becomes ``path``.
+
+    The temporary file exists (empty) when the block starts, lives in the same folder (so the
+    rename is atomic) and is named uniquely, so two writers of one target never share it. Its
+    name ends in random characters, not ``path``'s suffix, so a scan for ``*.pt`` or
+    ``*.jsonl`` never takes a half-written file for a whole one. On an exception it is
+    removed and ``path`` is untouched. The result gets the mode a
+    plainly created file would (``0o666`` less the umask), not ``mkstemp``'s private ``0o600``.
+
+    Args:
+        path: The file to write. Missing parent folders are created.
+
+    Raises:
+        OSError: The folder cannot be written, or the rename fails (``path`` is a folder).
+
+    Example:
+        >>> with atomic_path(out / "table.parquet") as tmp:  # doctest: +SKIP
+        ...     pq.write_table(table, tmp)
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        yield tmp
+        os.chmod(tmp, _FILE_MODE)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_text_atomically(path: str | Path, text: str, newline: str | None = None) -> None:
+    """Writes ``text`` as UTF-8 to ``path`` whole or not at all (see ``atomic_path``).
+
+    Args:
+        path: The file to write.
+        text: Its content.
+        newline: As ``open``'s: ``""`` writes line ends as they are in ``text`` (CSV's CRLF).
+    """
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline=newline) as f:
+        f.write(text)
