@@ -16,6 +16,7 @@ PACKAGE = REPO / "vgm_studio"
 STAGES = {
     "core": 0,
     "errors": 0,
+    "atomic": 0,
     "datasets": 1,
     "maps": 1,
     "simulation": 2,
