@@ -52,6 +52,13 @@ def test_a_folder_in_the_way_raises_oserror_and_leaves_no_temporary(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.csv"]
 
 
+def test_a_file_where_the_folder_should_be_says_so(tmp_path):
+    (tmp_path / "out").write_text("not a folder")
+    with pytest.raises(NotADirectoryError, match="a file stands where its folder should"):
+        write_text_atomically(tmp_path / "out" / "labels.csv", "a,b\r\n")
+    assert (tmp_path / "out").read_text() == "not a folder"
+
+
 def test_two_writers_of_one_file_never_share_a_temporary_and_the_last_wins_whole(tmp_path):
     target = tmp_path / "row.json"
     with atomic_path(target) as first, atomic_path(target) as second:

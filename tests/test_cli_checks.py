@@ -111,6 +111,9 @@ def test_unwritable_outputs_fail_before_any_work(tmp_path):
     assert "/proc/sim: cannot write here" in one_line_error(
         run("simulate", "--out", "/proc/sim"), 1
     )
+    # A file where a folder of the path should be: the message names it, not the target.
+    line = one_line_error(run("candidates", DEMO, "--out", existing / "sub" / "x.jsonl"), 1)
+    assert line.endswith(f"cannot write here ({existing} is a file, not a folder)")
 
 
 @pytest.mark.parametrize(

@@ -6,6 +6,7 @@ half of one, whether the writer raises, is killed or the disk fills.
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from collections.abc import Iterator
@@ -38,14 +39,21 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         path: The file to write. Missing parent folders are created.
 
     Raises:
-        OSError: The folder cannot be written, or the rename fails (``path`` is a folder).
+        OSError: The folder cannot be made or written (``NotADirectoryError`` where a file
+            stands in its place), or the rename fails (``path`` is a folder).
 
     Example:
         >>> with atomic_path(out / "table.parquet") as tmp:  # doctest: +SKIP
         ...     pq.write_table(table, tmp)
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        # mkdir's "File exists" for a parent that is a file reads as if the target were.
+        raise NotADirectoryError(
+            errno.ENOTDIR, "a file stands where its folder should", str(path.parent)
+        ) from None
     fd, name = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     os.close(fd)
     tmp = Path(name)

@@ -103,6 +103,9 @@ def writable_folder(path: Path, option: str = "--out") -> None:
 
 def _probe(folder: Path, prefix: str, named: Path) -> None:
     """Makes ``folder`` and writes a file in it, or says (of ``named``) why not."""
+    in_the_way = next((p for p in (folder, *folder.parents) if p.exists() and not p.is_dir()), None)
+    if in_the_way is not None:
+        raise InputError(named, f"cannot write here ({in_the_way} is a file, not a folder)")
     try:
         folder.mkdir(parents=True, exist_ok=True)
         fd, probe = tempfile.mkstemp(prefix=prefix, dir=folder)
