@@ -175,7 +175,7 @@ def _validation_columns(edges: list[Any], settings: FleetSettings, out: Path) ->
     validator = shared_validator(settings.model)
     p = validator.predict(edges, progress=False) if edges else np.zeros(0)
     lines = [f"{e.edge_id},{pe:.6f}\n" for e, pe in zip(edges, p, strict=True)]
-    out.write_text("edge_id,p_success\n" + "".join(lines), encoding="utf-8")
+    write_text_atomically(out, "edge_id,p_success\n" + "".join(lines))
     keep = validator.decide(p)
     cols: dict[str, Any] = {
         "model": validator.name,

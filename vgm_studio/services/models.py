@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from vgm_studio.atomic import atomic_path
+from vgm_studio.atomic import atomic_path, write_text_atomically
 from vgm_studio.errors import InputError
 from vgm_studio.labels.opening import open_store
 from vgm_studio.model.checkpoint import Checkpoint, load_checkpoint
@@ -70,8 +70,7 @@ def evaluate_model(
             "edges": [str(p) for p in edges],
         }
         try:
-            json_out.parent.mkdir(parents=True, exist_ok=True)
-            json_out.write_text(json.dumps(record, indent=2) + "\n")
+            write_text_atomically(json_out, json.dumps(record, indent=2) + "\n")
         except OSError as exc:
             raise InputError(
                 json_out, f"cannot write ({exc.strerror or type(exc).__name__})"
