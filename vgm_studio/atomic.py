@@ -1,7 +1,10 @@
 """Files written whole or not at all: a temporary file beside the target, then a rename.
 
 A reader (another process, the studio, a resumed run) sees the old file or the new one, never
-half of one, whether the writer raises, is killed or the disk fills.
+half of one, whether the writer raises, is killed or the disk fills. A power cut is another
+matter: nothing here waits for the disk (no fsync), which the files written often (resume
+states every epoch, a fleet's rows) would pay for each time. The trainer's model versions,
+which the label store's rows name, do wait (``trainer.fit.write_checkpoint``).
 """
 
 from __future__ import annotations
@@ -32,8 +35,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     rename is atomic) and is named uniquely, so two writers of one target never share it. Its
     name ends in random characters, not ``path``'s suffix, so a scan for ``*.pt`` or
     ``*.jsonl`` never takes a half-written file for a whole one. On an exception it is
-    removed and ``path`` is untouched. The result gets the mode a
-    plainly created file would (``0o666`` less the umask), not ``mkstemp``'s private ``0o600``.
+    removed and ``path`` is untouched. The result gets the mode a plainly created file would
+    (``0o666`` less the umask), not ``mkstemp``'s private ``0o600``.
 
     Args:
         path: The file to write. Missing parent folders are created.
