@@ -54,8 +54,10 @@ def test_a_folder_in_the_way_raises_oserror_and_leaves_no_temporary(tmp_path):
 
 def test_a_file_where_the_folder_should_be_says_so(tmp_path):
     (tmp_path / "out").write_text("not a folder")
-    with pytest.raises(NotADirectoryError, match="a file stands where its folder should"):
-        write_text_atomically(tmp_path / "out" / "labels.csv", "a,b\r\n")
+    for target in (tmp_path / "out" / "labels.csv", tmp_path / "out" / "sub" / "labels.csv"):
+        with pytest.raises(NotADirectoryError) as raised:
+            write_text_atomically(target, "a,b\r\n")
+        assert raised.value.strerror == f"{tmp_path / 'out'} is a file, not a folder"
     assert (tmp_path / "out").read_text() == "not a folder"
 
 

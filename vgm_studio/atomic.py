@@ -10,11 +10,13 @@ which the label store's rows name, do wait (``trainer.fit.write_checkpoint``).
 from __future__ import annotations
 
 import errno
+import json
 import os
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 
 def _read_umask() -> int:
@@ -42,8 +44,9 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         path: The file to write. Missing parent folders are created.
 
     Raises:
-        OSError: The folder cannot be made or written (``NotADirectoryError`` where a file
-            stands in its place), or the rename fails (``path`` is a folder).
+        OSError: The folder cannot be made or written (``NotADirectoryError`` naming the
+            file that stands where a folder should), or the rename fails (``path`` is a
+            folder).
 
     Example:
         >>> with atomic_path(out / "table.parquet") as tmp:  # doctest: +SKIP
@@ -52,11 +55,13 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-    except FileExistsError:
+    except (FileExistsError, NotADirectoryError):
         # mkdir's "File exists" for a parent that is a file reads as if the target were.
-        raise NotADirectoryError(
-            errno.ENOTDIR, "a file stands where its folder should", str(path.parent)
-        ) from None
+        blocker = file_in_the_way(path.parent)
+        if blocker is None:
+            raise
+        text = f"{blocker} is a file, not a folder"
+        raise NotADirectoryError(errno.ENOTDIR, text, str(blocker)) from None
     fd, name = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     os.close(fd)
     tmp = Path(name)
@@ -67,6 +72,17 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def file_in_the_way(folder: Path) -> Path | None:
+    """The file that stands where ``folder`` or one of the folders above it should be; None
+    where there is none (the folder can then be made, permissions allowing)."""
+    return next((p for p in (folder, *folder.parents) if p.exists() and not p.is_dir()), None)
+
+
+def write_json_atomically(path: str | Path, doc: dict[str, Any]) -> None:
+    """Writes ``doc`` as indented JSON to ``path`` whole or not at all (see ``atomic_path``)."""
+    write_text_atomically(path, json.dumps(doc, indent=2) + "\n")
 
 
 def write_text_atomically(path: str | Path, text: str, newline: str | None = None) -> None:

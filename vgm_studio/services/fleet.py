@@ -24,6 +24,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from vgm_studio.atomic import write_json_atomically
 from vgm_studio.datasets.manifest import ManifestEntry, read_manifest
 from vgm_studio.errors import InputError
 from vgm_studio.services import Say, quiet
@@ -35,7 +36,6 @@ from vgm_studio.services.fleet_log import (
     log_folder,
     log_key,
     process_log,
-    write_json_atomically,
 )
 from vgm_studio.services.fleet_table import (
     GRID_FILE,

@@ -223,8 +223,3 @@ def slam_columns(doc: dict[str, Any]) -> dict[str, Any]:
 
 def _finite(value: Any) -> float | None:
     return float(value) if value is not None and np.isfinite(value) else None
-
-
-def write_json_atomically(path: Path, doc: dict[str, Any]) -> None:
-    """Writes to a temporary file beside ``path`` and renames: ``path`` is whole or absent."""
-    write_text_atomically(path, json.dumps(doc, indent=2) + "\n")

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import json
 import math
 import shutil
 import time
 from pathlib import Path
 from typing import Any
 
-from vgm_studio.atomic import atomic_path, write_text_atomically
+from vgm_studio.atomic import atomic_path, write_json_atomically
 from vgm_studio.errors import InputError
 from vgm_studio.labels.opening import open_store
 from vgm_studio.model.checkpoint import Checkpoint, load_checkpoint
@@ -70,7 +69,7 @@ def evaluate_model(
             "edges": [str(p) for p in edges],
         }
         try:
-            write_text_atomically(json_out, json.dumps(record, indent=2) + "\n")
+            write_json_atomically(json_out, record)
         except OSError as exc:
             raise InputError(
                 json_out, f"cannot write ({exc.strerror or type(exc).__name__})"

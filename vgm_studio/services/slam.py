@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from vgm_studio.atomic import write_text_atomically
+from vgm_studio.atomic import write_json_atomically
 from vgm_studio.datasets import ReadOptions
 from vgm_studio.datasets.scans import ScanLog
 from vgm_studio.datasets.source import JoinOptions, LogSource, read_slam_source
@@ -169,7 +169,7 @@ def _write_outputs(
 
 def _write_json(path: Path, doc: dict[str, Any]) -> None:
     try:
-        write_text_atomically(path, json.dumps(doc, indent=2) + "\n")
+        write_json_atomically(path, doc)
     except OSError as exc:
         raise InputError(path, f"cannot write ({exc.strerror or exc})") from None
 

@@ -21,6 +21,7 @@ from typing import Annotated, Any
 
 import typer
 
+from vgm_studio.atomic import file_in_the_way
 from vgm_studio.datasets import ReadOptions
 from vgm_studio.datasets.mount import parse_laser_pose
 from vgm_studio.errors import InputError
@@ -103,7 +104,7 @@ def writable_folder(path: Path, option: str = "--out") -> None:
 
 def _probe(folder: Path, prefix: str, named: Path) -> None:
     """Makes ``folder`` and writes a file in it, or says (of ``named``) why not."""
-    in_the_way = next((p for p in (folder, *folder.parents) if p.exists() and not p.is_dir()), None)
+    in_the_way = file_in_the_way(folder)
     if in_the_way is not None:
         raise InputError(named, f"cannot write here ({in_the_way} is a file, not a folder)")
     try:
