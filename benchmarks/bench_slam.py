@@ -9,7 +9,8 @@ vgmnet validator and ``--robust none``:
   default ``--poses auto`` reads a corrected log that way), scored with relations drawn from
   their corrected poses (``--reference`` scoring). ``--poses odometry`` would read the
   corrected FLASER poses as odometry, so it is not used here.
-- ``mit-csail``: no reference; loops proposed and kept, and the map.
+- ``mit-csail`` and ``fr-clinic`` (the Freiburg hospital, a ROBOTLASER1 log of interlaced
+  180/181-beam scans, 1.4 km): no reference; loops proposed and kept, and the map.
 - simulated ``office``, ``repetitive`` and ``corridor`` worlds, seeds 1–4, with 10 injected
   false loop closures each, scored against the simulator's TRUEPOS.
 
@@ -62,13 +63,13 @@ CORRECTED = (
 )
 WORLDS = ("office", "repetitive", "corridor")
 SEEDS = (1, 2, 3, 4)
-PICTURES = ("infinite-corridor", "mit-csail", "intel")
+PICTURES = ("infinite-corridor", "mit-csail", "fr-clinic", "intel")
 TARGET_INTEL_M, TARGET_INTEL_S, TARGET_CORRECTED_M = 0.025, 60.0, 0.10
 
 
 def rows_known() -> list[str]:
     sims = [f"{w}-{s}" for w in WORLDS for s in SEEDS]
-    return ["intel", *CORRECTED, "mit-csail", *sims]
+    return ["intel", *CORRECTED, "mit-csail", "fr-clinic", *sims]
 
 
 def _simulated(name: str) -> Path:
@@ -95,6 +96,8 @@ def arguments(
         args = [data / "radish-corrected" / f"{name}-corrected.log"]
     elif name == "mit-csail":
         args = [data / "mit-csail" / "mit-csail.clf"]
+    elif name == "fr-clinic":
+        args = [data / "fr-clinic" / "fr-clinic_robotlaser.clf"]
     else:
         args = [_simulated(name), "--inject-false-loops", "10", "--seed", name.rsplit("-")[-1]]
     if name in PICTURES and pictures:
