@@ -146,7 +146,9 @@ def test_a_simulated_log_scores_against_its_own_reference_without_a_relations_fi
     out = tmp_path / "demo.json"
     cmd.main(["slam", str(demo), "--validator", "reference", "--json", str(out)])
     doc = json.loads(out.read_text())
-    assert "relations drawn from the reference poses" in capsys.readouterr().out
+    said = capsys.readouterr()
+    assert "relations drawn from the reference poses" in said.out
+    assert "no loop" not in said.out + said.err
     for name in ("odometry", "before", "after"):
         assert set(doc[name]) == {"trans_mean", "trans_std", "rot_mean_deg", "rot_std_deg", "n"}
         assert doc[name]["n"] > 100
@@ -202,3 +204,16 @@ def test_scans_between_keyframes_share_both_keyframes_corrections():
     longer = np.vstack([odometry, [[2.1, 0.21, 0.0]]])
     tail = scan_poses(truth[keyframes], keyframes, longer)[-1]
     np.testing.assert_allclose(tail, [2.1, 0.01, 0.0], atol=1e-9)
+
+
+def test_a_run_that_closes_no_loop_says_so_and_where_the_loops_went(tmp_path, capsys):
+    """Part of a lap: the robot never comes back, the after map is the sequential matches
+    alone, and the run says so instead of looking finished."""
+    log = simulate(SimConfig(preset="office", seed=3, laps=0.3), tmp_path)
+    cmd.main(["slam", str(log), "--validator", "reference"])
+    said = capsys.readouterr()
+    assert "0 kept after the consistency check" in said.out
+    warning = [line for line in said.err.splitlines() if "no loop" in line]
+    assert len(warning) == 1
+    assert warning[0].startswith(f"{log}: no loop")
+    assert "nothing corrects their drift" in warning[0]

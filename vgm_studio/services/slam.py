@@ -174,6 +174,31 @@ def _write_json(path: Path, doc: dict[str, Any]) -> None:
         raise InputError(path, f"cannot write ({exc.strerror or exc})") from None
 
 
+def _no_loop_closed(log: ScanLog, result: SlamResult) -> list[str]:
+    """Why the after map has no loop in it, where it has none: nothing then bounds the drift
+    of the sequential matches, and a long run with no loop looks as finished as one with
+    many. The counts say at which stage the loops went (the Freiburg hospital's 1.4 km: 5,399
+    proposed, 488 placed, 9 passed the validator; its path crosses itself twice and never
+    runs a corridor again)."""
+    loops = [e for e in result.edges if e.kind == "loop" and not e.injected]
+    if any(e.kept for e in loops):
+        return []
+    metres = f"{log.travelled_distance():.0f} m"
+    if not loops:
+        return [
+            f"{log.path}: no loop proposed over {metres}: the estimate never brings the robot "
+            "back near an earlier keyframe, so the after map is the sequential matches alone "
+            "and nothing corrects their drift"
+        ]
+    placed = sum(e.match.covariance is not None for e in loops)
+    validated = sum(e.validated for e in loops)
+    return [
+        f"{log.path}: no loop closed over {metres} ({len(loops)} proposed, {placed} placed by "
+        f"the loop matcher, {validated} passed the validator, none kept by the consistency "
+        "check): the after map is the sequential matches alone and nothing corrects their drift"
+    ]
+
+
 def _what_is_missing(log: ScanLog, result: SlamResult) -> list[str]:
     """Why a short or still log's outputs are thin, and whether the scans and odometry agree."""
     lines = []
@@ -192,6 +217,8 @@ def _what_is_missing(log: ScanLog, result: SlamResult) -> list[str]:
             f"{log.path}: one keyframe (the robot never moved a keyframe's distance or angle): "
             "no edges and no loops; the maps and recording hold that one scan"
         )
+    else:
+        lines += _no_loop_closed(log, result)
     if not log.has_odometry:
         return lines
     seq = [e for e in result.edges if e.kind == "sequential"]
