@@ -217,3 +217,12 @@ def test_a_run_that_closes_no_loop_says_so_and_where_the_loops_went(tmp_path, ca
     assert len(warning) == 1
     assert warning[0].startswith(f"{log}: no loop")
     assert "nothing corrects their drift" in warning[0]
+
+
+def test_a_run_too_short_to_propose_a_loop_says_so(tmp_path, capsys):
+    """Fewer keyframes than the loop search's minimum gap: no loop is even proposed."""
+    log = simulate(SimConfig(preset="office", seed=3, laps=0.05), tmp_path)
+    cmd.main(["slam", str(log), "--validator", "reference"])
+    said = capsys.readouterr()
+    assert "loops: 0 proposed" in said.out
+    assert f"{log}: no loop proposed over" in said.err
