@@ -184,19 +184,17 @@ def _no_loop_closed(log: ScanLog, result: SlamResult) -> list[str]:
     if any(e.kept for e in loops):
         return []
     metres = f"{log.travelled_distance():.0f} m"
+    alone = "the after map is the sequential matches alone and nothing corrects their drift"
     if not loops:
         return [
-            f"{log.path}: no loop proposed over {metres}: the estimate never brings the robot "
-            "back near an earlier keyframe, so the after map is the sequential matches alone "
-            "and nothing corrects their drift"
+            f"{log.path}: no loop proposed over {metres}: neither the estimate nor place "
+            f"recognition brought the robot back to an earlier place, so {alone}"
         ]
     placed = sum(e.match.covariance is not None for e in loops)
     validated = sum(e.validated for e in loops)
-    return [
-        f"{log.path}: no loop closed over {metres} ({len(loops)} proposed, {placed} placed by "
-        f"the loop matcher, {validated} passed the validator, none kept by the consistency "
-        "check): the after map is the sequential matches alone and nothing corrects their drift"
-    ]
+    stages = f"{len(loops)} proposed, {placed} placed by the loop matcher, {validated} passed "
+    stages += "the validator, none kept by the consistency check" if validated else "the validator"
+    return [f"{log.path}: no loop closed over {metres} ({stages}): {alone}"]
 
 
 def _what_is_missing(log: ScanLog, result: SlamResult) -> list[str]:
