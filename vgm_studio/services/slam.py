@@ -192,8 +192,10 @@ def _no_loop_closed(log: ScanLog, result: SlamResult) -> list[str]:
         ]
     placed = sum(e.match.covariance is not None for e in loops)
     validated = sum(e.validated for e in loops)
-    stages = f"{len(loops)} proposed, {placed} placed by the loop matcher, {validated} passed "
-    stages += "the validator, none kept by the consistency check" if validated else "the validator"
+    stages = f"{len(loops)} proposed, {placed} placed by the loop matcher"
+    stages += f", {validated} passed the validator"
+    if validated:
+        stages += ", none kept by the consistency check"
     return [f"{log.path}: no loop closed over {metres} ({stages}): {alone}"]
 
 
