@@ -1,0 +1,211 @@
+"""How much of the leave-one-building-out comparison is the training seed.
+
+``bench_generalisation.py`` trains one ``vgmnet`` and one ``rgb-baseline`` per fold, each
+with seed 0, and counts the buildings where ``vgmnet`` is ahead. On the small buildings the
+two disagree on one to six loops, so that count may turn on the seeds. This script trains
+each fold's two networks again with other seeds (the same recipes, files and second look as
+that table) and prints, per building, each seed's accuracy, and the count of buildings
+``vgmnet`` is ahead on for every pairing of a ``vgmnet`` seed with an ``rgb-baseline`` one.
+
+Many folds at once: ``--jobs`` processes, each loading the edges once, share one device;
+on a CPU give each process ``--threads`` of the cores. Each job writes its fold model and
+its test judgements under ``--out``, so a stopped run goes on with the next job, and
+``--summary`` prints the tables from whatever is there.
+
+Run: python benchmarks/bench_seed_spread.py [--seeds 1,2] [--jobs 8] [--device cuda]
+     [--out build/seeds] [--summary]
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import multiprocessing
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from _common import REPO, machine, table
+from bench_generalisation import _recipe, buildings, subset
+from folds import Fold, make_folds
+
+NETWORKS = ("vgmnet", "rgb-baseline")
+
+
+@dataclass
+class _Loaded:
+    """One process's edges: every fold's training and test files, read once."""
+
+    args: argparse.Namespace
+    folds: dict[str, Fold]
+    data: Any  # training.LabelledSet, imported late so --help stays fast
+    origin: list[str]  # the file each edge came from
+
+
+_LOADED: list[_Loaded] = []  # this process's, set by _load
+
+
+def _load(args: argparse.Namespace) -> list[str]:
+    """Reads every fold's edges into this process; the held-out buildings, in fold order."""
+    from vgm_studio.model.training import read_labelled
+
+    folds = _folds(args)
+    files = sorted({p for f in folds for p in f.train} | {f.test for f in folds})
+    data = read_labelled(files, progress=False)
+    origin = [f["path"] for f in data.files for _ in range(f["used"])]
+    _LOADED[:] = [_Loaded(args, {f.held_out: f for f in folds}, data, origin)]
+    return [f.held_out for f in folds]
+
+
+def _folds(args: argparse.Namespace) -> list[Fold]:
+    made, sims = buildings([])
+    return make_folds(made, sims, [b for b in args.buildings.split(",") if b] or None)
+
+
+def _job(job: tuple[str, str, int]) -> str:
+    """Trains one fold model with one seed and writes its test judgements; one line back."""
+    import torch
+
+    from vgm_studio.model.training import TrainConfig, train
+    from vgm_studio.model.validator import SecondLook, Validator
+    from vgm_studio.vgm.grid import VGMParams
+
+    building, model, seed = job
+    loaded = _LOADED[0]
+    args = loaded.args
+    result = Path(args.out) / f"{building}-{model}-seed{seed}.json"
+    if result.exists():
+        return f"{building} {model} seed {seed}: done before"
+    torch.set_num_threads(args.threads)
+    fold = loaded.folds[building]
+    training = subset(loaded.data, loaded.origin, fold.train)
+    test = subset(loaded.data, loaded.origin, [fold.test])
+    epochs, epoch_size = _recipe(model)
+    config = TrainConfig(
+        model=model,
+        epochs=args.epochs or epochs,
+        epoch_size=args.epoch_size or epoch_size,
+        seed=seed,
+        device=args.device,
+        threads=args.threads,
+        # The bundled default's inputs, as bench_generalisation.py trains its fold models.
+        hyper={"figures": True, "spread": True} if model == "vgmnet" else {},
+        vgm=VGMParams(),
+    )
+    start = time.perf_counter()
+    path = result.with_suffix(".pt")
+    checkpoint = train(training, config, path, progress=False, log=lambda _line: None)
+    trained = time.perf_counter() - start
+    look = SecondLook(turns=args.second_look)
+    probs = Validator.load(path, device=args.device, second_look=look).predict_samples(test.samples)
+    right = (probs >= checkpoint.threshold) == test.labels
+    spent = time.perf_counter() - start
+    result.write_text(
+        json.dumps(
+            {
+                "building": building,
+                "model": model,
+                "seed": seed,
+                "threshold": checkpoint.threshold,
+                "p": [round(float(p), 6) for p in probs],
+                "labels": test.labels.tolist(),
+                "right": right.tolist(),
+                "train_s": trained,
+                "total_s": spent,
+                "device": args.device,
+            }
+        )
+    )
+    return (
+        f"{building} {model} seed {seed}: accuracy {right.mean():.4f} "
+        f"({trained:.0f} s training, {spent:.0f} s in all)"
+    )
+
+
+def _train_all(args: argparse.Namespace) -> None:
+    seeds = [int(s) for s in args.seeds.split(",")]
+    models = [m for m in args.models.split(",") if m]
+    if args.jobs == 1:
+        names = _load(args)
+        for job in [(b, m, s) for m in models for s in seeds for b in names]:
+            print(_job(job), flush=True)
+        return
+    jobs = [(f.held_out, m, s) for m in models for s in seeds for f in _folds(args)]
+    print(f"{len(jobs)} jobs on {args.jobs} processes, {args.threads} threads each", flush=True)
+    # Spawned, each loading the edges itself: a pool forked after the parent had loaded them
+    # (torch's thread pools already running) hung before its first job on a 16-core machine.
+    with multiprocessing.get_context("spawn").Pool(args.jobs, _load, (args,)) as pool:
+        for line in pool.imap_unordered(_job, jobs):
+            print(line, flush=True)
+
+
+def _summary(out: Path) -> None:
+    """Per building each seed's accuracy; per seed pairing the buildings vgmnet is ahead on."""
+    from vgm_studio.model.metrics import paired_comparison
+
+    runs = [json.loads(p.read_text()) for p in sorted(out.glob("*-seed*.json"))]
+    right = {(r["building"], r["model"], r["seed"]): np.array(r["right"]) for r in runs}
+    seeds = {m: sorted({s for (_, mm, s) in right if mm == m}) for m in NETWORKS}
+    names = sorted({b for (b, _, _) in right})
+    rows = []
+    for b in names:
+        cells = [b]
+        for m in NETWORKS:
+            cells.append(
+                " / ".join(
+                    f"{right[b, m, s].mean():.4f}" if (b, m, s) in right else "—" for s in seeds[m]
+                )
+            )
+        rows.append(cells)
+    header = ["held out", *(f"{m} accuracy, seeds {seeds[m]}" for m in NETWORKS)]
+    print(table(header, rows))
+    rows = []
+    for sv, sr in itertools.product(seeds["vgmnet"], seeds["rgb-baseline"]):
+        both = [b for b in names if (b, "vgmnet", sv) in right and (b, "rgb-baseline", sr) in right]
+        ahead = behind = beyond = level = 0
+        for b in both:
+            c = paired_comparison(right[b, "vgmnet", sv], right[b, "rgb-baseline", sr])
+            lead = c.only_first - c.only_second
+            ahead += lead > 0
+            level += lead == 0
+            behind += lead < 0
+            beyond += lead < 0 and c.p_value < 0.05
+        rows.append(
+            [str(sv), str(sr), str(len(both)), str(ahead), str(level), str(behind), str(beyond)]
+        )
+    header = ["vgmnet seed", "rgb seed", "buildings", "ahead", "level", "behind", "behind, p<0.05"]
+    print(table(header, rows))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--seeds", default="1,2", help="Comma-separated training seeds.")
+    parser.add_argument("--models", default=",".join(NETWORKS), help="Comma-separated networks.")
+    parser.add_argument("--buildings", default="", help="Comma-separated held-out buildings.")
+    parser.add_argument("--jobs", type=int, default=1, help="Fold models trained at once.")
+    parser.add_argument("--threads", type=int, default=2, help="torch threads per job.")
+    parser.add_argument("--device", default="cpu", help="cpu or cuda.")
+    parser.add_argument("--epochs", type=int, default=None, help="Epochs per fold model.")
+    parser.add_argument("--epoch-size", type=int, default=None, help="Draws per epoch.")
+    parser.add_argument("--second-look", type=int, default=4, metavar="TURNS")
+    parser.add_argument("--out", default=str(REPO / "build" / "seeds"))
+    parser.add_argument("--summary", action="store_true", help="Only print the tables.")
+    args = parser.parse_args()
+    unknown = sorted(set(args.models.split(",")) - set(NETWORKS))
+    if unknown:
+        raise SystemExit(f"--models: unknown {', '.join(unknown)}; known: {', '.join(NETWORKS)}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if not args.summary:
+        _train_all(args)
+    print(f"\n# leave-one-building-out by training seed; second look over {args.second_look}")
+    print(f"# {machine()}")
+    _summary(out)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
