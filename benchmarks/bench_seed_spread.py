@@ -32,6 +32,7 @@ import numpy as np
 from _common import REPO, machine, table
 from bench_generalisation import _recipe, buildings, subset
 from folds import Fold, make_folds
+from numpy.typing import NDArray
 
 NETWORKS = ("vgmnet", "rgb-baseline")
 
@@ -144,41 +145,74 @@ def _train_all(args: argparse.Namespace) -> None:
 
 
 def _summary(out: Path) -> None:
-    """Per building each seed's accuracy; per seed pairing the buildings vgmnet is ahead on."""
-    from vgm_studio.model.metrics import paired_comparison
-
+    """Per building each seed's accuracy and, per seed pairing, the loops only one network
+    judged right; then per pairing the buildings vgmnet is ahead on."""
     runs = [json.loads(p.read_text()) for p in sorted(out.glob("*-seed*.json"))]
     right = {(r["building"], r["model"], r["seed"]): np.array(r["right"]) for r in runs}
     seeds = {m: sorted({s for (_, mm, s) in right if mm == m}) for m in NETWORKS}
     names = sorted({b for (b, _, _) in right})
-    rows = []
-    for b in names:
-        cells = [b]
-        for m in NETWORKS:
-            cells.append(
-                " / ".join(
-                    f"{right[b, m, s].mean():.4f}" if (b, m, s) in right else "—" for s in seeds[m]
-                )
-            )
-        rows.append(cells)
-    header = ["held out", *(f"{m} accuracy, seeds {seeds[m]}" for m in NETWORKS)]
+    pairings = list(itertools.product(seeds["vgmnet"], seeds["rgb-baseline"]))
+    rows = [_building_row(b, right, seeds, pairings) for b in names]
+    header = [
+        "held out",
+        *(f"{m} accuracy, seed {s}" for m in NETWORKS for s in seeds[m]),
+        *(f"only vgmnet {sv} / only rgb {sr} right (p)" for sv, sr in pairings),
+    ]
     print(table(header, rows))
-    rows = []
-    for sv, sr in itertools.product(seeds["vgmnet"], seeds["rgb-baseline"]):
-        both = [b for b in names if (b, "vgmnet", sv) in right and (b, "rgb-baseline", sr) in right]
-        ahead = behind = beyond = level = 0
-        for b in both:
+    for m in NETWORKS:
+        for s in seeds[m]:
+            acc = [right[b, m, s].mean() for b in names if (b, m, s) in right]
+            print(f"{m} seed {s}: mean accuracy {np.mean(acc):.4f}, lowest {min(acc):.4f}")
+    print(
+        table(["vgmnet seed", "rgb seed", *_COUNTS], [_counts(right, names, p) for p in pairings])
+    )
+
+
+_COUNTS = ["buildings", "ahead", "level", "behind", "ahead, p<0.05", "behind, p<0.05"]
+
+
+def _building_row(
+    b: str,
+    right: dict[tuple[str, str, int], NDArray[np.bool_]],
+    seeds: dict[str, list[int]],
+    pairings: list[tuple[int, int]],
+) -> list[str]:
+    from vgm_studio.model.metrics import paired_comparison
+
+    cells = [b]
+    cells += [
+        f"{right[b, m, s].mean():.4f}" if (b, m, s) in right else "—"
+        for m in NETWORKS
+        for s in seeds[m]
+    ]
+    for sv, sr in pairings:
+        if (b, "vgmnet", sv) in right and (b, "rgb-baseline", sr) in right:
             c = paired_comparison(right[b, "vgmnet", sv], right[b, "rgb-baseline", sr])
-            lead = c.only_first - c.only_second
-            ahead += lead > 0
-            level += lead == 0
-            behind += lead < 0
-            beyond += lead < 0 and c.p_value < 0.05
-        rows.append(
-            [str(sv), str(sr), str(len(both)), str(ahead), str(level), str(behind), str(beyond)]
-        )
-    header = ["vgmnet seed", "rgb seed", "buildings", "ahead", "level", "behind", "behind, p<0.05"]
-    print(table(header, rows))
+            cells.append(f"{c.only_first} / {c.only_second} ({c.p_value:.3f})")
+        else:
+            cells.append("—")
+    return cells
+
+
+def _counts(
+    right: dict[tuple[str, str, int], NDArray[np.bool_]], names: list[str], pairing: tuple[int, int]
+) -> list[str]:
+    """One seed pairing: on how many buildings vgmnet is ahead, level, behind."""
+    from vgm_studio.model.metrics import paired_comparison
+
+    sv, sr = pairing
+    both = [b for b in names if (b, "vgmnet", sv) in right and (b, "rgb-baseline", sr) in right]
+    counts = dict.fromkeys(_COUNTS[1:], 0)
+    for b in both:
+        c = paired_comparison(right[b, "vgmnet", sv], right[b, "rgb-baseline", sr])
+        lead = c.only_first - c.only_second
+        sure = c.p_value < 0.05
+        counts["ahead"] += lead > 0
+        counts["level"] += lead == 0
+        counts["behind"] += lead < 0
+        counts["ahead, p<0.05"] += lead > 0 and sure
+        counts["behind, p<0.05"] += lead < 0 and sure
+    return [str(sv), str(sr), str(len(both)), *map(str, counts.values())]
 
 
 def main() -> None:
