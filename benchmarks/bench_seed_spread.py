@@ -71,6 +71,7 @@ def _job(job: tuple[str, str, int]) -> str:
     """Trains one fold model with one seed and writes its test judgements; one line back."""
     import torch
 
+    from vgm_studio.atomic import write_json_atomically
     from vgm_studio.model.training import TrainConfig, train
     from vgm_studio.model.validator import SecondLook, Validator
     from vgm_studio.vgm.grid import VGMParams
@@ -105,21 +106,21 @@ def _job(job: tuple[str, str, int]) -> str:
     probs = Validator.load(path, device=args.device, second_look=look).predict_samples(test.samples)
     right = (probs >= checkpoint.threshold) == test.labels
     spent = time.perf_counter() - start
-    result.write_text(
-        json.dumps(
-            {
-                "building": building,
-                "model": model,
-                "seed": seed,
-                "threshold": checkpoint.threshold,
-                "p": [round(float(p), 6) for p in probs],
-                "labels": test.labels.tolist(),
-                "right": right.tolist(),
-                "train_s": trained,
-                "total_s": spent,
-                "device": args.device,
-            }
-        )
+    # Whole or absent: a job killed mid-write is run again, not read half.
+    write_json_atomically(
+        result,
+        {
+            "building": building,
+            "model": model,
+            "seed": seed,
+            "threshold": checkpoint.threshold,
+            "p": [round(float(p), 6) for p in probs],
+            "labels": test.labels.tolist(),
+            "right": right.tolist(),
+            "train_s": trained,
+            "total_s": spent,
+            "device": args.device,
+        },
     )
     return (
         f"{building} {model} seed {seed}: accuracy {right.mean():.4f} "
@@ -138,7 +139,7 @@ def _train_all(args: argparse.Namespace) -> None:
     jobs = [(f.held_out, m, s) for m in models for s in seeds for f in _folds(args)]
     print(f"{len(jobs)} jobs on {args.jobs} processes, {args.threads} threads each", flush=True)
     # Spawned, each loading the edges itself: a pool forked after the parent had loaded them
-    # (torch's thread pools already running) hung before its first job on a 16-core machine.
+    # hung before its first job on a 16-core GPU machine (cause not traced).
     with multiprocessing.get_context("spawn").Pool(args.jobs, _load, (args,)) as pool:
         for line in pool.imap_unordered(_job, jobs):
             print(line, flush=True)
