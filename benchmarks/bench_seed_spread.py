@@ -64,7 +64,10 @@ def _load(args: argparse.Namespace) -> list[str]:
 
 def _folds(args: argparse.Namespace) -> list[Fold]:
     made, sims = buildings([])
-    return make_folds(made, sims, [b for b in args.buildings.split(",") if b] or None)
+    try:
+        return make_folds(made, sims, [b for b in args.buildings.split(",") if b] or None)
+    except ValueError as exc:
+        raise SystemExit(f"--buildings: {exc}") from None
 
 
 def _job(job: tuple[str, str, int]) -> str:
@@ -129,7 +132,7 @@ def _job(job: tuple[str, str, int]) -> str:
 
 
 def _train_all(args: argparse.Namespace) -> None:
-    seeds = [int(s) for s in args.seeds.split(",")]
+    seeds = args.seeds
     models = [m for m in args.models.split(",") if m]
     if args.jobs == 1:
         names = _load(args)
@@ -149,6 +152,8 @@ def _summary(out: Path) -> None:
     """Per building each seed's accuracy and, per seed pairing, the loops only one network
     judged right; then per pairing the buildings vgmnet is ahead on."""
     runs = [json.loads(p.read_text()) for p in sorted(out.glob("*-seed*.json"))]
+    if not runs:
+        raise SystemExit(f"{out}: no fold judgements here yet; run without --summary first")
     right = {(r["building"], r["model"], r["seed"]): np.array(r["right"]) for r in runs}
     seeds = {m: sorted({s for (_, mm, s) in right if mm == m}) for m in NETWORKS}
     names = sorted({b for (b, _, _) in right})
@@ -216,9 +221,20 @@ def _counts(
     return [str(sv), str(sr), str(len(both)), *map(str, counts.values())]
 
 
+def _seeds(text: str) -> list[int]:
+    try:
+        return [int(s) for s in text.split(",") if s]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"not whole numbers separated by commas: {text!r}"
+        ) from None
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--seeds", default="1,2", help="Comma-separated training seeds.")
+    parser.add_argument(
+        "--seeds", type=_seeds, default="1,2", help="Comma-separated training seeds."
+    )
     parser.add_argument("--models", default=",".join(NETWORKS), help="Comma-separated networks.")
     parser.add_argument("--buildings", default="", help="Comma-separated held-out buildings.")
     parser.add_argument("--jobs", type=int, default=1, help="Fold models trained at once.")
