@@ -148,12 +148,14 @@ def _train_all(args: argparse.Namespace) -> None:
             print(line, flush=True)
 
 
-def _summary(out: Path) -> None:
+def _summary(out: Path, turns: int) -> None:
     """Per building each seed's accuracy and, per seed pairing, the loops only one network
     judged right; then per pairing the buildings vgmnet is ahead on."""
     runs = [json.loads(p.read_text()) for p in sorted(out.glob("*-seed*.json"))]
     if not runs:
         raise SystemExit(f"{out}: no fold judgements here yet; run without --summary first")
+    print(f"\n# leave-one-building-out by training seed; second look over {turns}")
+    print(f"# {machine()}")
     right = {(r["building"], r["model"], r["seed"]): np.array(r["right"]) for r in runs}
     seeds = {m: sorted({s for (_, mm, s) in right if mm == m}) for m in NETWORKS}
     names = sorted({b for (b, _, _) in right})
@@ -253,9 +255,7 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     if not args.summary:
         _train_all(args)
-    print(f"\n# leave-one-building-out by training seed; second look over {args.second_look}")
-    print(f"# {machine()}")
-    _summary(out)
+    _summary(out, args.second_look)
 
 
 if __name__ == "__main__":
