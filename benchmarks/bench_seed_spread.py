@@ -170,7 +170,10 @@ def _summary(out: Path, turns: int) -> None:
     for m in NETWORKS:
         for s in seeds[m]:
             acc = [right[b, m, s].mean() for b in names if (b, m, s) in right]
-            print(f"{m} seed {s}: mean accuracy {np.mean(acc):.4f}, lowest {min(acc):.4f}")
+            print(
+                f"{m} seed {s}: mean accuracy {np.mean(acc):.4f}, lowest {min(acc):.4f} "
+                f"(over {len(acc)} of {len(names)} buildings)"
+            )
     print(
         table(["vgmnet seed", "rgb seed", *_COUNTS], [_counts(right, names, p) for p in pairings])
     )
