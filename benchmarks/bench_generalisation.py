@@ -33,6 +33,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from _common import RGB_CPU_RECIPE, datasets_dir, machine, pin_to_cores, table
@@ -40,6 +41,9 @@ from edge_sets import BUILD, training_edges
 from folds import Building, make_folds
 from numpy.typing import NDArray
 from recalibrate import recalibrate
+
+if TYPE_CHECKING:
+    from vgm_studio.model.training import TrainConfig
 
 MODELS = ("vgmnet", "rgb-baseline", "score")
 # Per (building, model): which of the building's test loops the model judged right.
@@ -57,6 +61,31 @@ def _recipe(model: str) -> tuple[int, int | None]:
 
     defaults = TrainConfig()
     return CPU_RECIPES.get(model, (defaults.epochs, defaults.epoch_size))
+
+
+def fold_config(
+    model: str,
+    epochs: int | None = None,
+    epoch_size: int | None = None,
+    cell: float | None = None,
+    **overrides: Any,
+) -> TrainConfig:
+    """How a fold's ``model`` is trained: its recipe (``epochs`` and ``epoch_size`` where
+    given), the bundled default's inputs, ``vgmnet`` on ``cell`` metre cells (None: the
+    paper's); ``overrides`` set any other ``TrainConfig`` field."""
+    from vgm_studio.model.training import TrainConfig
+    from vgm_studio.vgm.grid import VGMParams
+
+    recipe_epochs, recipe_size = _recipe(model)
+    return TrainConfig(
+        model=model,
+        epochs=epochs or recipe_epochs,
+        epoch_size=epoch_size or recipe_size,
+        # The bundled default's inputs (train_default.py: the command's defaults).
+        hyper={"figures": True, "spread": True} if model == "vgmnet" else {},
+        vgm=VGMParams(resolution=cell) if model == "vgmnet" and cell else VGMParams(),
+        **overrides,
+    )
 
 
 def _candidates(log: Path, out: Path, *args: str) -> Path:
@@ -142,7 +171,7 @@ def _fold_rows(
     """Trains each model on the fold's training files and tests it on the held-out loops;
     ``right`` gets, per (building, model), which test pairs the model judged right."""
     from vgm_studio.model.checkpoint import load_checkpoint
-    from vgm_studio.model.training import TrainConfig, train
+    from vgm_studio.model.training import train
     from vgm_studio.model.validator import SecondLook, Validator
     from vgm_studio.vgm.grid import VGMParams
 
@@ -155,16 +184,8 @@ def _fold_rows(
         grid = f"-cell{args.cell:g}" if model == "vgmnet" and args.cell != paper else ""
         out = BUILD / "folds" / f"{fold.held_out}-{model}{grid}.pt"
         out.parent.mkdir(parents=True, exist_ok=True)  # a fresh clone has no build/ yet
-        epochs, epoch_size = _recipe(model)
-        config = TrainConfig(
-            model=model,
-            epochs=args.epochs or epochs,
-            epoch_size=args.epoch_size or epoch_size,
-            max_train=args.max_train,
-            device="cpu",
-            # The bundled default's inputs (train_default.py: the command's defaults).
-            hyper={"figures": True, "spread": True} if model == "vgmnet" else {},
-            vgm=VGMParams(resolution=args.cell) if model == "vgmnet" else VGMParams(),
+        config = fold_config(
+            model, args.epochs, args.epoch_size, args.cell, max_train=args.max_train, device="cpu"
         )
         kept = load_checkpoint(out) if out.exists() else None
         # A fold model on other VGMs (another --cell) is trained again, not reused.

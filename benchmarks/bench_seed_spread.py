@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 from _common import REPO, machine, table
-from bench_generalisation import _recipe, buildings, subset
+from bench_generalisation import buildings, fold_config, subset
 from folds import Fold, make_folds
 from numpy.typing import NDArray
 
@@ -75,9 +75,8 @@ def _job(job: tuple[str, str, int]) -> str:
     import torch
 
     from vgm_studio.atomic import write_json_atomically
-    from vgm_studio.model.training import TrainConfig, train
+    from vgm_studio.model.training import train
     from vgm_studio.model.validator import SecondLook, Validator
-    from vgm_studio.vgm.grid import VGMParams
 
     building, model, seed = job
     loaded = _LOADED[0]
@@ -89,17 +88,8 @@ def _job(job: tuple[str, str, int]) -> str:
     fold = loaded.folds[building]
     training = subset(loaded.data, loaded.origin, fold.train)
     test = subset(loaded.data, loaded.origin, [fold.test])
-    epochs, epoch_size = _recipe(model)
-    config = TrainConfig(
-        model=model,
-        epochs=args.epochs or epochs,
-        epoch_size=args.epoch_size or epoch_size,
-        seed=seed,
-        device=args.device,
-        threads=args.threads,
-        # The bundled default's inputs, as bench_generalisation.py trains its fold models.
-        hyper={"figures": True, "spread": True} if model == "vgmnet" else {},
-        vgm=VGMParams(),
+    config = fold_config(
+        model, args.epochs, args.epoch_size, seed=seed, device=args.device, threads=args.threads
     )
     start = time.perf_counter()
     path = result.with_suffix(".pt")
@@ -132,14 +122,15 @@ def _job(job: tuple[str, str, int]) -> str:
 
 
 def _train_all(args: argparse.Namespace) -> None:
-    seeds = args.seeds
     models = [m for m in args.models.split(",") if m]
+    # In-process, the held-out buildings come with the loaded edges; a pool's workers load
+    # their own, so the parent only lists the folds (their check reads every edge file once).
+    names = _load(args) if args.jobs == 1 else [f.held_out for f in _folds(args)]
+    jobs = [(b, m, s) for m in models for s in args.seeds for b in names]
     if args.jobs == 1:
-        names = _load(args)
-        for job in [(b, m, s) for m in models for s in seeds for b in names]:
+        for job in jobs:
             print(_job(job), flush=True)
         return
-    jobs = [(f.held_out, m, s) for m in models for s in seeds for f in _folds(args)]
     print(f"{len(jobs)} jobs on {args.jobs} processes, {args.threads} threads each", flush=True)
     # Spawned, each loading the edges itself: a pool forked after the parent had loaded them
     # hung before its first job on a 16-core GPU machine (cause not traced).
