@@ -127,6 +127,11 @@ def test_spread_figures_come_from_the_match_covariance():
     both = figures_matrix([sample, degenerate], spread=True)
     np.testing.assert_allclose(both, [[0.8, -2.0, -2.0, -6.0], [0.8, -2.0, 0.0, 0.0]])
     assert figures_matrix([sample], spread=False).shape == (1, 2)
+    # The variances alone: the matcher's inlier ratio and residual left out.
+    np.testing.assert_allclose(
+        figures_matrix([sample, degenerate], True, inliers=False), both[:, 2:]
+    )
+    assert figures_matrix([sample], spread=False, inliers=False).shape == (1, 0)
 
 
 def test_rgb_plot_colours():
@@ -291,15 +296,18 @@ def test_train_and_eval_commands(sim_edges, tmp_path):
     assert zero.returncode == 2 and "--cell-size" in zero.stderr and "Traceback" not in zero.stderr
 
 
-@pytest.mark.parametrize(("occupancy", "spread"), [(False, False), (True, True)])
-def test_prefolded_lifted_input_matches_network_on_raw_vgms(occupancy, spread):
+@pytest.mark.parametrize(
+    ("occupancy", "spread", "inliers"),
+    [(False, False, True), (True, True, True), (False, True, False)],
+)
+def test_prefolded_lifted_input_matches_network_on_raw_vgms(occupancy, spread, inliers):
     from vgm_studio.model.features import figures_matrix
     from vgm_studio.model.registry import build_network
     from vgm_studio.model.validator import input_spec
 
     torch.manual_seed(0)
     net, hyper = build_network(
-        "vgmnet", {"figures": True, "occupancy": occupancy, "spread": spread}
+        "vgmnet", {"figures": True, "occupancy": occupancy, "spread": spread, "inliers": inliers}
     )
     net.eval()
     spec = input_spec("vgmnet", hyper, VGMParams())
@@ -307,8 +315,8 @@ def test_prefolded_lifted_input_matches_network_on_raw_vgms(occupancy, spread):
     samples = random_samples(3, seed=3)
     x, extra = spec.tensors(samples, torch.device("cpu"))
     raw = torch.from_numpy(vgm_batch(samples, VGMParams()).copy())
-    figs = torch.from_numpy(figures_matrix(samples, spread).astype(np.float32))
-    assert extra is not None and extra.shape == (3, 4 if spread else 2)
+    figs = torch.from_numpy(figures_matrix(samples, spread, inliers).astype(np.float32))
+    assert extra is not None and extra.shape == (3, 2 * inliers + 2 * spread)
     with torch.inference_mode():
         np.testing.assert_allclose(net(x, extra).numpy(), net(raw, figs).numpy(), atol=1e-5)
 

@@ -213,15 +213,19 @@ def rgb_batch(
     return out
 
 
-def figures_matrix(samples: Sequence[PairSample], spread: bool = False) -> NDArray[np.float64]:
+def figures_matrix(
+    samples: Sequence[PairSample], spread: bool = False, inliers: bool = True
+) -> NDArray[np.float64]:
     """(N, 2) matcher figures: inlier ratio and log10 residual; with ``spread`` (N, 4), the
-    estimate's log10 position and heading variances after them."""
-    res = np.array([s.residual for s in samples], dtype=np.float64)
-    res = np.where(np.isfinite(res), res, 1.0)
-    columns: list[list[float] | NDArray[np.float64]] = [
-        [s.inlier_ratio for s in samples],
-        np.log10(np.maximum(res, 1e-4)),
-    ]
+    estimate's log10 position and heading variances after them. Without ``inliers`` the
+    first two are left out (the variances alone, or (N, 0))."""
+    columns: list[list[float] | NDArray[np.float64]] = []
+    if inliers:
+        res = np.array([s.residual for s in samples], dtype=np.float64)
+        res = np.where(np.isfinite(res), res, 1.0)
+        columns += [[s.inlier_ratio for s in samples], np.log10(np.maximum(res, 1e-4))]
     if spread:
         columns += [[s.spread_xy for s in samples], [s.spread_theta for s in samples]]
+    if not columns:
+        return np.zeros((len(samples), 0), dtype=np.float64)
     return np.column_stack(columns)

@@ -127,7 +127,9 @@ class SparseConfig:
     the lift lets them count. ``occupancy`` adds each scan's occupied cells as two more
     channels, every point at equal weight, as the RGB plot baseline sees them. ``spread``
     adds the estimate's log10 position and heading variances to the figures: a match along
-    a featureless corridor is free to slide, and its covariance says so."""
+    a featureless corridor is free to slide, and its covariance says so. ``inliers`` off
+    leaves the inlier ratio and residual out of the figures, the variances alone: how many
+    points agree depends on a building's clutter and scan density, more than on the match."""
 
     fold: int = 8
     pointwise: int = 32
@@ -138,6 +140,7 @@ class SparseConfig:
     lift: float = 0.5
     occupancy: bool = False
     spread: bool = False
+    inliers: bool = True
 
 
 class VGMNet(nn.Module):
@@ -155,7 +158,7 @@ class VGMNet(nn.Module):
             nn.ReLU(inplace=True),
         ]
         self.features, width = _stack(stem, c.pointwise, c.channels)
-        extra = (4 if c.spread else 2) if c.figures else 0
+        extra = (2 * c.inliers + 2 * c.spread) if c.figures else 0
         self.head = _PooledHead(width, c.hidden, c.dropout, extra=extra)
 
     def forward(self, x: torch.Tensor, extra: torch.Tensor | None = None) -> torch.Tensor:

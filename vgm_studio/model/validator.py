@@ -51,6 +51,7 @@ class InputSpec:
     lift: float = 1.0
     occupancy: bool = False
     spread: bool = False
+    inliers: bool = True
 
     def batch(
         self,
@@ -68,7 +69,7 @@ class InputSpec:
             )
         if self.kind == "rgb":
             return rgb_batch(samples, self.image, rotations)
-        return figures_matrix(samples, self.spread)
+        return figures_matrix(samples, self.spread, self.inliers)
 
     def tensors(
         self,
@@ -81,7 +82,7 @@ class InputSpec:
         x = x.contiguous(memory_format=torch.channels_last)
         extra = None
         if self.figures:
-            figures = figures_matrix(samples, self.spread).astype(np.float32)
+            figures = figures_matrix(samples, self.spread, self.inliers).astype(np.float32)
             extra = torch.from_numpy(figures).to(device)
         return x, extra
 
@@ -99,8 +100,16 @@ def input_spec(model: str, hyper: dict[str, Any], vgm: VGMParams) -> InputSpec:
     lift = float(hyper.get("lift", 1.0)) if fold > 1 else 1.0
     occupancy = bool(hyper.get("occupancy", False)) and fold > 1
     figures = bool(hyper.get("figures", False))
+    inliers = bool(hyper.get("inliers", True))
     return InputSpec(
-        "vgm", vgm, fold=fold, figures=figures, lift=lift, occupancy=occupancy, spread=spread
+        "vgm",
+        vgm,
+        fold=fold,
+        figures=figures,
+        lift=lift,
+        occupancy=occupancy,
+        spread=spread,
+        inliers=inliers,
     )
 
 
@@ -149,7 +158,11 @@ def _cells_logits(
     cells = folded_cells(
         samples, spec.vgm, rotations, fold=spec.fold, lift=spec.lift, occupancy=spec.occupancy
     )
-    figures = figures_matrix(samples, spec.spread).astype(np.float32) if spec.figures else None
+    figures = (
+        figures_matrix(samples, spec.spread, spec.inliers).astype(np.float32)
+        if spec.figures
+        else None
+    )
     step = cells.batch if net.training else _NET_CHUNK
     # Cells come sorted by pair, so each chunk's cells are one slice.
     bounds = np.searchsorted(cells.pair, np.arange(0, cells.batch + step, step))
