@@ -73,6 +73,7 @@ def fold_config(
     """How a fold's ``model`` is trained: its recipe (``epochs`` and ``epoch_size`` where
     given), the bundled default's inputs, ``vgmnet`` on ``cell`` metre cells (None: the
     paper's); ``overrides`` set any other ``TrainConfig`` field."""
+    from vgm_studio.model.registry import default_hyper
     from vgm_studio.model.training import TrainConfig
     from vgm_studio.vgm.grid import VGMParams
 
@@ -82,7 +83,7 @@ def fold_config(
         epochs=epochs or recipe_epochs,
         epoch_size=epoch_size or recipe_size,
         # The bundled default's inputs (train_default.py: the command's defaults).
-        hyper={"figures": True, "spread": True} if model == "vgmnet" else {},
+        hyper=default_hyper(model),
         vgm=VGMParams(resolution=cell) if model == "vgmnet" and cell else VGMParams(),
         **overrides,
     )

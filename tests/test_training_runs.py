@@ -178,6 +178,21 @@ def test_a_run_starts_from_the_given_checkpoint_and_refuses_another_model(tmp_pa
         train(data, replace(config, init=str(tmp_path / "w.pt")), tmp_path / "e.pt", **quiet)
 
 
+def test_a_checkpoint_saved_before_a_hyper_parameter_existed_still_starts_a_run():
+    """The bundled model's hyper-parameters predate ``inliers``; a warm start from it must
+    still match the network today's defaults build, and not one built otherwise."""
+    from vgm_studio.model.checkpoint import Checkpoint
+    from vgm_studio.model.registry import build_network
+
+    net, full = build_network("vgmnet", {"figures": True, "spread": True})
+    saved = {k: v for k, v in full.items() if k != "inliers"}
+    old = Checkpoint(model="vgmnet", hyper=saved, state_dict=net.state_dict())
+    assert old.starts("vgmnet", full, VGMParams()) is not None
+    _, variances_alone = build_network("vgmnet", {**full, "inliers": False})
+    assert old.starts("vgmnet", variances_alone, VGMParams()) is None
+    assert old.starts("vgmnet", full, VGMParams(resolution=0.1)) is None
+
+
 def test_precise_batch_norm_recomputes_the_statistics_and_leaves_the_learning_alone(rows):
     """With ``bn_batches`` each validation reads batch norm's statistics recomputed over
     training draws: the learnt weights are those of a run without it, to the bit (the draws

@@ -20,6 +20,7 @@ from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.errors import InputError
 from vgm_studio.model.checkpoint_schema import parse_checkpoint_meta
 from vgm_studio.model.operating import PrecisionCurve, threshold_for_precision
+from vgm_studio.model.registry import build_network
 from vgm_studio.vgm.grid import VGMParams
 
 FORMAT = "vgm-studio-model/1"
@@ -67,8 +68,12 @@ class Checkpoint:
     ) -> dict[str, torch.Tensor] | None:
         """Its weights, when they fit a ``model`` network built with ``hyper`` that reads
         ``vgm`` VGMs (a warm start); None when it is another model or other settings."""
-        same = self.model == model and self.hyper == hyper and self.vgm == vgm
-        return self.state_dict if same else None
+        if self.model != model or self.vgm != vgm:
+            return None
+        # Completed with today's defaults: a field added since it was saved (``inliers``) is
+        # absent from its hyper-parameters, and was then what its default is now.
+        _net, mine = build_network(model, self.hyper)
+        return self.state_dict if mine == hyper else None
 
     def to_dict(self) -> dict[str, Any]:
         """The on-disk layout."""

@@ -31,6 +31,7 @@ class HyperFlags:
     figures: bool = True
     occupancy: bool = False
     spread: bool | None = None
+    inliers: bool = True
 
 
 @dataclass(frozen=True)
@@ -87,6 +88,7 @@ def _vgmnet_hyper(flags: HyperFlags) -> dict[str, Any]:
         "figures": flags.figures,
         "occupancy": flags.occupancy,
         "spread": flags.figures and flags.spread is not False,
+        "inliers": flags.inliers,
     }
 
 
@@ -150,6 +152,12 @@ def entry(name: str) -> ModelEntry:
         if m.name == name:
             return m
     raise InputError(None, f"unknown model {name!r} (choose from {', '.join(MODEL_NAMES)})")
+
+
+def default_hyper(name: str) -> dict[str, Any]:
+    """``name``'s hyper-parameters as ``vgm-studio train`` sets them unasked: the bundled
+    model's inputs, which the background trainer and the benchmarks' folds share."""
+    return entry(name).hyper(HyperFlags())
 
 
 def build_network(name: str, hyper: dict[str, Any] | None = None) -> Built:

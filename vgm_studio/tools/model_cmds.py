@@ -31,12 +31,13 @@ def train(
         int | None, typer.Option(min=2, help="Train on at most this many edges.")
     ] = None,
     augment: Annotated[bool, typer.Option(help="Random rigid rotations of pairs.")] = True,
+    # The defaults are HyperFlags's: the bundled model's inputs (``default_hyper``).
     figures: Annotated[
-        bool, typer.Option(help="vgmnet: also read the matcher's inlier ratio and residual.")
-    ] = True,
+        bool, typer.Option(help="vgmnet: also read the matcher's figures (--inliers, --spread).")
+    ] = HyperFlags.figures,
     occupancy: Annotated[
         bool, typer.Option(help="vgmnet: also read each scan's occupied cells, as a plot does.")
-    ] = False,
+    ] = HyperFlags.occupancy,
     spread: Annotated[
         bool | None,
         typer.Option(
@@ -44,6 +45,13 @@ def train(
             show_default="on for vgmnet, off for score",
         ),
     ] = None,
+    inliers: Annotated[
+        bool,
+        typer.Option(
+            help="vgmnet: the figures include the matcher's inlier ratio and residual "
+            "(--no-inliers: the variances alone)."
+        ),
+    ] = HyperFlags.inliers,
     cell_size: Annotated[
         float,
         typer.Option(
@@ -89,7 +97,7 @@ def train(
         device=device.value,
         threads=threads,
         init=None if init is None else str(init),
-        hyper=entry(model).hyper(HyperFlags(figures, occupancy, spread)),
+        hyper=entry(model).hyper(HyperFlags(figures, occupancy, spread, inliers)),
         vgm=VGMParams(resolution=cell_size),
     )
     typer.echo(train_model(edges, out, config, warn=lambda line: typer.echo(line, err=True)))

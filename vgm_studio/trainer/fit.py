@@ -24,7 +24,7 @@ from vgm_studio.model.checkpoint import Checkpoint
 from vgm_studio.model.features import PairSample
 from vgm_studio.model.fitting import EpochHook, Recipe, Rows, fit_network
 from vgm_studio.model.operating import PrecisionCurve, precision_curve
-from vgm_studio.model.registry import MODELS, build_network
+from vgm_studio.model.registry import MODELS, build_network, default_hyper
 from vgm_studio.model.validator import input_spec
 from vgm_studio.vgm.grid import VGMParams
 
@@ -59,7 +59,7 @@ class FitConfig:
     patience: int = 4
     augment: bool = True
     seed: int = 0
-    hyper: dict[str, Any] = field(default_factory=lambda: {"figures": True, "spread": True})
+    hyper: dict[str, Any] = field(default_factory=lambda: default_hyper(MODEL))
     vgm: VGMParams = field(default_factory=VGMParams)
 
     def recipe(self) -> Recipe:
