@@ -35,6 +35,18 @@ from folds import Fold, make_folds
 from numpy.typing import NDArray
 
 NETWORKS = ("vgmnet", "rgb-baseline")
+# ``--inputs``: what ``vgmnet`` reads besides the VGM, as hyper-parameters over the bundled
+# model's (``default_hyper``); an ablation's fold models are kept beside the default's.
+INPUTS: dict[str, dict[str, bool]] = {
+    "default": {},
+    "no-figures": {"figures": False, "spread": False},
+    "variances": {"figures": True, "spread": True, "inliers": False},
+}
+
+
+def _stem(building: str, model: str, seed: int, inputs: str) -> str:
+    tag = f"{model}-{inputs}" if model == "vgmnet" and inputs != "default" else model
+    return f"{building}-{tag}-seed{seed}"
 
 
 @dataclass
@@ -81,9 +93,9 @@ def _job(job: tuple[str, str, int]) -> str:
     building, model, seed = job
     loaded = _LOADED[0]
     args = loaded.args
-    result = Path(args.out) / f"{building}-{model}-seed{seed}.json"
+    result = Path(args.out) / f"{_stem(building, model, seed, args.inputs)}.json"
     if result.exists():
-        return f"{building} {model} seed {seed}: done before"
+        return f"{result.stem}: done before"
     torch.set_num_threads(args.threads)
     fold = loaded.folds[building]
     training = subset(loaded.data, loaded.origin, fold.train)
@@ -91,6 +103,8 @@ def _job(job: tuple[str, str, int]) -> str:
     config = fold_config(
         model, args.epochs, args.epoch_size, seed=seed, device=args.device, threads=args.threads
     )
+    if model == "vgmnet":
+        config.hyper.update(INPUTS[args.inputs])
     start = time.perf_counter()
     path = result.with_suffix(".pt")
     checkpoint = train(training, config, path, progress=False, log=lambda _line: None)
@@ -106,6 +120,7 @@ def _job(job: tuple[str, str, int]) -> str:
             "building": building,
             "model": model,
             "seed": seed,
+            "inputs": args.inputs if model == "vgmnet" else "default",
             "threshold": checkpoint.threshold,
             "p": [round(float(p), 6) for p in probs],
             "labels": test.labels.tolist(),
@@ -116,7 +131,7 @@ def _job(job: tuple[str, str, int]) -> str:
         },
     )
     return (
-        f"{building} {model} seed {seed}: accuracy {right.mean():.4f} "
+        f"{result.stem}: accuracy {right.mean():.4f} "
         f"({trained:.0f} s training, {spent:.0f} s in all)"
     )
 
@@ -139,15 +154,19 @@ def _train_all(args: argparse.Namespace) -> None:
             print(line, flush=True)
 
 
-def _summary(out: Path, turns: int) -> None:
+def _summary(out: Path, turns: int, inputs: str) -> None:
     """Per building each seed's accuracy and, per seed pairing, the loops only one network
-    judged right; then per pairing the buildings vgmnet is ahead on."""
+    judged right; then per pairing the buildings vgmnet (read with ``inputs``) is ahead on."""
     runs = [json.loads(p.read_text()) for p in sorted(out.glob("*-seed*.json"))]
+    runs = [r for r in runs if r["model"] != "vgmnet" or r.get("inputs", "default") == inputs]
     if not runs:
         raise SystemExit(f"{out}: no fold judgements here yet; run without --summary first")
     print(f"\n# leave-one-building-out by training seed; second look over {turns}")
+    extra = INPUTS[inputs] or "(the bundled model's)"
+    print(f"# vgmnet's inputs: {inputs} {extra}")
     print(f"# {machine()}")
     right = {(r["building"], r["model"], r["seed"]): np.array(r["right"]) for r in runs}
+    scored = {(r["building"], r["model"], r["seed"]): r for r in runs}
     seeds = {m: sorted({s for (_, mm, s) in right if mm == m}) for m in NETWORKS}
     names = sorted({b for (b, _, _) in right})
     pairings = list(itertools.product(seeds["vgmnet"], seeds["rgb-baseline"]))
@@ -168,6 +187,35 @@ def _summary(out: Path, turns: int) -> None:
     print(
         table(["vgmnet seed", "rgb seed", *_COUNTS], [_counts(right, names, p) for p in pairings])
     )
+    _ranking(scored, names, seeds)
+
+
+def _ranking(
+    scored: dict[tuple[str, str, int], dict[str, Any]],
+    names: list[str],
+    seeds: dict[str, list[int]],
+) -> None:
+    """Per building and draw: AUC, accuracy at the cut chosen on validation, and at the
+    building's own best cut (hindsight: what a cut that transferred perfectly would give).
+    Separates a model that ranks the loops worse from one whose cut landed worse."""
+    from vgm_studio.model.metrics import roc_auc
+
+    print("\n# ranking and cut: AUC / accuracy at the validation cut / at the best cut")
+    header = ["held out", *(f"{m} seed {s}" for m in NETWORKS for s in seeds[m])]
+    rows = []
+    for b in names:
+        cells = [b]
+        for m in NETWORKS:
+            for s in seeds[m]:
+                r = scored.get((b, m, s))
+                if r is None:
+                    cells.append("—")
+                    continue
+                p, y = np.array(r["p"]), np.array(r["labels"], dtype=bool)
+                best = max(float(np.mean((p >= c) == y)) for c in [*np.unique(p), np.inf])
+                cells.append(f"{roc_auc(y, p):.4f} / {np.mean(r['right']):.4f} / {best:.4f}")
+        rows.append(cells)
+    print(table(header, rows))
 
 
 _COUNTS = ["buildings", "ahead", "level", "behind", "ahead, p<0.05", "behind, p<0.05"]
@@ -240,6 +288,9 @@ def main() -> None:
     parser.add_argument("--epoch-size", type=int, default=None, help="Draws per epoch.")
     parser.add_argument("--second-look", type=int, default=4, metavar="TURNS")
     parser.add_argument("--out", default=str(REPO / "build" / "seeds"))
+    parser.add_argument(
+        "--inputs", choices=sorted(INPUTS), default="default", help="What vgmnet reads."
+    )
     parser.add_argument("--summary", action="store_true", help="Only print the tables.")
     args = parser.parse_args()
     unknown = sorted(set(args.models.split(",")) - set(NETWORKS))
@@ -249,7 +300,7 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     if not args.summary:
         _train_all(args)
-    _summary(out, args.second_look)
+    _summary(out, args.second_look, args.inputs)
 
 
 if __name__ == "__main__":
