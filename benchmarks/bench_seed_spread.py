@@ -22,7 +22,9 @@ import argparse
 import itertools
 import json
 import multiprocessing
+import os
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,6 +43,7 @@ INPUTS: dict[str, dict[str, bool]] = {
     "default": {},
     "no-figures": {"figures": False, "spread": False},
     "variances": {"figures": True, "spread": True, "inliers": False},
+    "blind-head": {"figures": True, "spread": True, "blind": True},
 }
 
 
@@ -136,6 +139,20 @@ def _job(job: tuple[str, str, int]) -> str:
     )
 
 
+def _worker(args: argparse.Namespace) -> None:
+    """A pool worker's start: it ends when the run that spawned it does. A killed parent
+    leaves spawned workers training on, each on a core, with no one to take their results."""
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True).start()
+    _load(args)
+
+
 def _train_all(args: argparse.Namespace) -> None:
     models = [m for m in args.models.split(",") if m]
     # In-process, the held-out buildings come with the loaded edges; a pool's workers load
@@ -149,7 +166,7 @@ def _train_all(args: argparse.Namespace) -> None:
     print(f"{len(jobs)} jobs on {args.jobs} processes, {args.threads} threads each", flush=True)
     # Spawned, each loading the edges itself: a pool forked after the parent had loaded them
     # hung before its first job on a 16-core GPU machine (cause not traced).
-    with multiprocessing.get_context("spawn").Pool(args.jobs, _load, (args,)) as pool:
+    with multiprocessing.get_context("spawn").Pool(args.jobs, _worker, (args,)) as pool:
         for line in pool.imap_unordered(_job, jobs):
             print(line, flush=True)
 

@@ -461,3 +461,44 @@ def test_second_look_averages_the_turned_pairs_inside_its_band_only(tmp_path):
     assert np.median(moved) > 1e-3, moved
     alone = Validator.load(path, device="cpu").predict_samples(samples, 10)
     np.testing.assert_allclose(alone, first, atol=1e-4)
+
+
+def test_a_blind_head_is_fitted_on_its_own_loss_and_averaged_in_eval():
+    """``blind``: a second head without the figures. Training fits each head to the labels
+    (the loss is the mean of the two heads' losses, not the loss of their mean); eval gives
+    the mean of the two logits, on the occupied-cells path as on the dense one."""
+    from vgm_studio.model.fitting import train_step
+    from vgm_studio.model.registry import build_network
+    from vgm_studio.model.validator import input_spec, network_logits
+
+    cpu = torch.device("cpu")
+    torch.manual_seed(0)
+    net, hyper = build_network("vgmnet", {"figures": True, "spread": True, "blind": True})
+    assert build_network("vgmnet", {"figures": False, "blind": True})[0].blind is None
+    spec = input_spec("vgmnet", hyper, VGMParams())
+    samples = random_samples(8, seed=4)
+    labels = np.arange(8) % 2 == 0
+    net.eval()
+    with torch.inference_mode():
+        x, extra = spec.tensors(samples, cpu)
+        feats = net.features(x)
+        want = (net.head(feats, extra) + net.blind(feats)) / 2
+        got = network_logits(net, spec, samples, cpu)
+    np.testing.assert_allclose(got.numpy(), want.numpy(), atol=1e-5)
+    net.train()
+    torch.manual_seed(7)
+    with torch.no_grad():
+        both = network_logits(net, spec, samples, cpu)
+    assert both.shape == (8, 2)
+    y = torch.from_numpy(labels.astype(np.float32))
+    bce = torch.nn.functional.binary_cross_entropy_with_logits
+    each = (bce(both[:, 0], y) + bce(both[:, 1], y)) / 2
+    assert abs(float(each) - float(bce(both.mean(dim=1), y))) > 1e-4  # the two rules differ
+    before = [h.mlp[-1].weight.clone() for h in (net.head, net.blind)]
+    optimiser = torch.optim.Adam(net.parameters(), lr=1e-2)
+    schedule = torch.optim.lr_scheduler.LambdaLR(optimiser, lambda _step: 1.0)
+    torch.manual_seed(7)  # the same dropout masks as above
+    loss = train_step(net, spec, samples, labels, None, optimiser, schedule, cpu)
+    assert loss == pytest.approx(float(each), abs=1e-5)
+    heads = (net.head, net.blind)
+    assert all(not torch.equal(b, h.mlp[-1].weight) for b, h in zip(before, heads, strict=True))

@@ -144,6 +144,8 @@ def train_step(
     """One optimiser step on a batch (each pair turned by ``rotations``); returns its loss."""
     logits = network_logits(net, spec, samples, device, rotations)
     y = torch.from_numpy(labels.astype(np.float32)).to(device)
+    if logits.dim() == 2:  # one logit per head (``VGMNet``'s blind head): each has its loss
+        y = y[:, None].expand_as(logits)
     loss = nn.functional.binary_cross_entropy_with_logits(logits, y)
     optimiser.zero_grad(set_to_none=True)
     loss.backward()  # type: ignore[no-untyped-call]

@@ -129,7 +129,12 @@ class SparseConfig:
     adds the estimate's log10 position and heading variances to the figures: a match along
     a featureless corridor is free to slide, and its covariance says so. ``inliers`` off
     leaves the inlier ratio and residual out of the figures, the variances alone: how many
-    points agree depends on a building's clutter and scan density, more than on the match."""
+    points agree depends on a building's clutter and scan density, more than on the match.
+    ``blind`` (with ``figures``) adds a second head that reads the pooled features alone: in
+    training each head has its own loss, and the network's logit is the mean of the two. It is
+    an ensemble, on one trunk, of a network that reads the figures and one that does not; the
+    figures help on long corridors and mislead on buildings unlike the training ones
+    (BENCHMARKS.md, session 22), and the second head costs one small MLP a pair."""
 
     fold: int = 8
     pointwise: int = 32
@@ -141,6 +146,7 @@ class SparseConfig:
     occupancy: bool = False
     spread: bool = False
     inliers: bool = True
+    blind: bool = False
 
 
 class VGMNet(nn.Module):
@@ -160,6 +166,7 @@ class VGMNet(nn.Module):
         self.features, width = _stack(stem, c.pointwise, c.channels)
         extra = (2 * c.inliers + 2 * c.spread) if c.figures else 0
         self.head = _PooledHead(width, c.hidden, c.dropout, extra=extra)
+        self.blind = _PooledHead(width, c.hidden, c.dropout) if c.blind and extra else None
 
     def forward(self, x: torch.Tensor, extra: torch.Tensor | None = None) -> torch.Tensor:
         """Takes (B, 2, S, S) VGMs, or the same already folded and lifted to
@@ -173,8 +180,16 @@ class VGMNet(nn.Module):
             else:
                 x = x.pow(self.lift)
             x = self.fold(x)
-        logit: torch.Tensor = self.head(self.features(x), extra)
-        return logit
+        return self._heads(self.features(x), extra)
+
+    def _heads(self, x: torch.Tensor, extra: torch.Tensor | None) -> torch.Tensor:
+        """The logit; with a ``blind`` head, the mean of both heads' in eval, and in training
+        both (B, 2), so that each head is fitted on its own (``fitting.train_step``)."""
+        logit: torch.Tensor = self.head(x, extra)
+        if self.blind is None:
+            return logit
+        both = torch.stack([logit, self.blind(x)], dim=1)
+        return both if self.training else both.mean(dim=1)
 
     def forward_cells(
         self,
@@ -213,8 +228,7 @@ class VGMNet(nn.Module):
         first = self.features[3]
         assert isinstance(first, nn.Sequential)
         x = _sparse_block(first, batch, side, rows, occupied - empty, empty)
-        out: torch.Tensor = self.head(self.features[4:](x), extra)
-        return out
+        return self._heads(self.features[4:](x), extra)
 
     def _stem_eval(
         self, rows: int, at: torch.Tensor, channel: torch.Tensor, value: torch.Tensor

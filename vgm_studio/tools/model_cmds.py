@@ -52,6 +52,13 @@ def train(
             "(--no-inliers: the variances alone)."
         ),
     ] = HyperFlags.inliers,
+    blind_head: Annotated[
+        bool,
+        typer.Option(
+            help="vgmnet: a second head that judges without the figures; the logit is the "
+            "mean of the two."
+        ),
+    ] = HyperFlags.blind,
     cell_size: Annotated[
         float,
         typer.Option(
@@ -97,7 +104,7 @@ def train(
         device=device.value,
         threads=threads,
         init=None if init is None else str(init),
-        hyper=entry(model).hyper(HyperFlags(figures, occupancy, spread, inliers)),
+        hyper=entry(model).hyper(HyperFlags(figures, occupancy, spread, inliers, blind_head)),
         vgm=VGMParams(resolution=cell_size),
     )
     typer.echo(train_model(edges, out, config, warn=lambda line: typer.echo(line, err=True)))
