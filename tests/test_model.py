@@ -294,6 +294,14 @@ def test_train_and_eval_commands(sim_edges, tmp_path):
     assert Validator.load(model).vgm == VGMParams(resolution=0.1)
     zero = cli("train", sim_edges[0], "--cell-size", 0, "--out", model)
     assert zero.returncode == 2 and "--cell-size" in zero.stderr and "Traceback" not in zero.stderr
+    # Switches that would build a network with nothing for its figures head to read.
+    for flags, named in (
+        (("--no-inliers", "--no-spread"), "--no-inliers"),
+        (("--no-figures", "--blind-head"), "--blind-head"),
+    ):
+        refused = cli("train", sim_edges[0], *flags, "--out", tmp_path / "x.pt")
+        assert refused.returncode == 2 and named in refused.stderr, refused.stderr
+        assert "Traceback" not in refused.stderr and not (tmp_path / "x.pt").exists()
 
 
 @pytest.mark.parametrize(

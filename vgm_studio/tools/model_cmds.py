@@ -89,6 +89,16 @@ def train(
 
     if out.suffix != ".pt":
         raise typer.BadParameter("the checkpoint must end in .pt", param_hint="--out")
+    if figures and not inliers and spread is False:
+        raise typer.BadParameter(
+            "with --no-spread too it leaves no figures to read; use --no-figures",
+            param_hint="--no-inliers",
+        )
+    if blind_head and not figures:
+        raise typer.BadParameter(
+            "is a second head beside the one that reads the figures; drop --no-figures",
+            param_hint="--blind-head",
+        )
     config = TrainConfig(
         model=model,
         epochs=epochs,
