@@ -169,6 +169,8 @@ def _train_all(args: argparse.Namespace) -> None:
     with multiprocessing.get_context("spawn").Pool(args.jobs, _worker, (args,)) as pool:
         for line in pool.imap_unordered(_job, jobs):
             print(line, flush=True)
+        pool.close()  # every job is done: let the workers end rather than be terminated
+        pool.join()
 
 
 def _summary(out: Path, turns: int, inputs: str) -> None:
