@@ -43,6 +43,7 @@ from numpy.typing import NDArray
 from recalibrate import recalibrate
 
 if TYPE_CHECKING:
+    from vgm_studio.model.registry import HyperFlags
     from vgm_studio.model.training import TrainConfig
 
 MODELS = ("vgmnet", "rgb-baseline", "score")
@@ -68,12 +69,14 @@ def fold_config(
     epochs: int | None = None,
     epoch_size: int | None = None,
     cell: float | None = None,
+    inputs: HyperFlags | None = None,
     **overrides: Any,
 ) -> TrainConfig:
     """How a fold's ``model`` is trained: its recipe (``epochs`` and ``epoch_size`` where
-    given), the bundled default's inputs, ``vgmnet`` on ``cell`` metre cells (None: the
-    paper's); ``overrides`` set any other ``TrainConfig`` field."""
-    from vgm_studio.model.registry import default_hyper
+    given), the inputs ``vgm-studio train``'s switches ``inputs`` give (None: the bundled
+    default's), ``vgmnet`` on ``cell`` metre cells (None: the paper's); ``overrides`` set any
+    other ``TrainConfig`` field."""
+    from vgm_studio.model.registry import HyperFlags, entry
     from vgm_studio.model.training import TrainConfig
     from vgm_studio.vgm.grid import VGMParams
 
@@ -82,8 +85,8 @@ def fold_config(
         model=model,
         epochs=epochs or recipe_epochs,
         epoch_size=epoch_size or recipe_size,
-        # The bundled default's inputs (train_default.py: the command's defaults).
-        hyper=default_hyper(model),
+        # Unasked, the bundled default's inputs (train_default.py: the command's defaults).
+        hyper=entry(model).hyper(inputs or HyperFlags()),
         vgm=VGMParams(resolution=cell) if model == "vgmnet" and cell else VGMParams(),
         **overrides,
     )

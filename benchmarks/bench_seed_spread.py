@@ -36,14 +36,17 @@ from bench_generalisation import buildings, fold_config, subset
 from folds import Fold, make_folds
 from numpy.typing import NDArray
 
+from vgm_studio.model.registry import HyperFlags, entry
+
 NETWORKS = ("vgmnet", "rgb-baseline")
-# ``--inputs``: what ``vgmnet`` reads besides the VGM, as hyper-parameters over the bundled
-# model's (``default_hyper``); an ablation's fold models are kept beside the default's.
-INPUTS: dict[str, dict[str, bool]] = {
-    "default": {},
-    "no-figures": {"figures": False, "spread": False},
-    "variances": {"figures": True, "spread": True, "inliers": False},
-    "blind-head": {"figures": True, "spread": True, "blind": True},
+# ``--inputs``: what ``vgmnet`` reads besides the VGM, as ``vgm-studio train``'s switches
+# (``--no-figures``, ``--no-inliers``, ``--blind-head``); an ablation's fold models are kept
+# beside the default's.
+INPUTS: dict[str, HyperFlags] = {
+    "default": HyperFlags(),
+    "no-figures": HyperFlags(figures=False),
+    "variances": HyperFlags(inliers=False),
+    "blind-head": HyperFlags(blind=True),
 }
 
 
@@ -104,10 +107,14 @@ def _job(job: tuple[str, str, int]) -> str:
     training = subset(loaded.data, loaded.origin, fold.train)
     test = subset(loaded.data, loaded.origin, [fold.test])
     config = fold_config(
-        model, args.epochs, args.epoch_size, seed=seed, device=args.device, threads=args.threads
+        model,
+        args.epochs,
+        args.epoch_size,
+        inputs=INPUTS[args.inputs],  # rgb-baseline has no switches: the same network
+        seed=seed,
+        device=args.device,
+        threads=args.threads,
     )
-    if model == "vgmnet":
-        config.hyper.update(INPUTS[args.inputs])
     start = time.perf_counter()
     path = result.with_suffix(".pt")
     checkpoint = train(training, config, path, progress=False, log=lambda _line: None)
@@ -181,11 +188,10 @@ def _summary(out: Path, turns: int, inputs: str) -> None:
     if not runs:
         raise SystemExit(f"{out}: no fold judgements here yet; run without --summary first")
     print(f"\n# leave-one-building-out by training seed; second look over {turns}")
-    extra = INPUTS[inputs] or "(the bundled model's)"
-    print(f"# vgmnet's inputs: {inputs} {extra}")
+    print(f"# vgmnet's inputs: {inputs} {entry('vgmnet').hyper(INPUTS[inputs])}")
     print(f"# {machine()}")
-    right = {(r["building"], r["model"], r["seed"]): np.array(r["right"]) for r in runs}
     scored = {(r["building"], r["model"], r["seed"]): r for r in runs}
+    right = {key: np.array(r["right"]) for key, r in scored.items()}
     seeds = {m: sorted({s for (_, mm, s) in right if mm == m}) for m in NETWORKS}
     names = sorted({b for (b, _, _) in right})
     pairings = list(itertools.product(seeds["vgmnet"], seeds["rgb-baseline"]))
