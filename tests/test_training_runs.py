@@ -193,6 +193,18 @@ def test_a_checkpoint_saved_before_a_hyper_parameter_existed_still_starts_a_run(
     assert old.starts("vgmnet", full, VGMParams(resolution=0.1)) is None
 
 
+def test_the_bundled_model_is_what_the_default_inputs_build():
+    """The background trainer starts from the bundled model with ``default_hyper``'s inputs:
+    a default changed without the bundled model trained again would leave every run cold."""
+    from vgm_studio.model.checkpoint import load_checkpoint
+    from vgm_studio.model.registry import BUNDLED_MODEL
+    from vgm_studio.trainer.fit import FitConfig
+
+    config = FitConfig()
+    _, hyper = build_network("vgmnet", config.hyper)
+    assert load_checkpoint(BUNDLED_MODEL).starts("vgmnet", hyper, config.vgm) is not None
+
+
 def test_precise_batch_norm_recomputes_the_statistics_and_leaves_the_learning_alone(rows):
     """With ``bn_batches`` each validation reads batch norm's statistics recomputed over
     training draws: the learnt weights are those of a run without it, to the bit (the draws
