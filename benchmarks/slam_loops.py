@@ -1,0 +1,107 @@
+"""Validators judged on the loops a SLAM run meets, before one replaces the bundled model.
+
+``bench_slam.py --model`` runs SLAM with another validator, but a run is chaotic: one loop
+decided otherwise early on sends a large building's run elsewhere (BENCHMARKS.md, sessions
+15–20), so its table cannot tell a worse validator from a different path. This script holds
+the loops still. It runs ``vgm-studio slam --loops-out`` once per building with the bundled
+model (cached in build/slam-loops) and judges every matched loop with each checkpoint given:
+per building, the right loops and the wrong ones (against the corrected poses) passed at the
+SLAM run's loop bar, and the AUC. The Freiburg hospital has no reference and, as far as its
+path shows, almost no revisit (BENCHMARKS.md, session 20): its row counts the loops passed,
+which are mostly corridor aliases.
+
+The benchmark loops (``bench_generalisation.py``) are reference poses nudged by random
+guesses; these are what place recognition and the window search propose, aliases included.
+A model can rank the first better and pass more of the second's wrong loops (session 23).
+
+Run: python benchmarks/slam_loops.py [MODEL.pt ...] [--bar 0.8]
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+from _common import REPO, datasets_dir, machine, pin_to_cores, table
+
+OUT = REPO / "build" / "slam-loops"
+BUNDLED = REPO / "assets" / "models" / "vgmnet-default.pt"
+CORRECTED = (
+    "acapulco", "belgioioso", "csail", "edmonton", "fhw", "freiburg-101", "freiburg-campus",
+    "infinite-corridor", "orebro", "seattle",
+)  # fmt: skip
+
+
+def _logs() -> dict[str, Path]:
+    data = datasets_dir()
+    logs = {b: data / "radish-corrected" / f"{b}-corrected.log" for b in CORRECTED}
+    return {**logs, "fr-clinic": data / "fr-clinic" / "fr-clinic_robotlaser.clf"}
+
+
+def loops_file(name: str, log: Path) -> Path:
+    """The loops the bundled model's run of ``log`` matched, made on first use."""
+    path = OUT / f"{name}.jsonl"
+    if not path.exists():
+        OUT.mkdir(parents=True, exist_ok=True)
+        done = subprocess.run(
+            [sys.executable, "-m", "vgm_studio.tools.cmd", "slam", str(log), "--robust", "none",
+             "--loops-out", str(path), "--json", str(OUT / f"{name}.json")],
+            capture_output=True, text=True,
+        )  # fmt: skip
+        if done.returncode != 0:
+            lines = done.stderr.strip().splitlines()
+            raise SystemExit(f"{log}: slam failed: {lines[-1] if lines else 'no message'}")
+    return path
+
+
+def _judged(p: np.ndarray, labels: np.ndarray, bar: float) -> str:
+    from vgm_studio.model.metrics import binary_metrics
+
+    known = np.isin(labels, ["success", "failure"])
+    if not known.any():
+        return f"{int((p >= bar).sum())} of {len(p)} passed"
+    y, q = labels[known] == "success", p[known]
+    right, wrong = int(((q >= bar) & y).sum()), int(((q >= bar) & ~y).sum())
+    return f"{right} / {wrong} / {binary_metrics(y, q, bar)['auc']:.3f}"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("models", nargs="*", type=Path, help="Checkpoints (default: bundled).")
+    parser.add_argument("--bar", type=float, default=0.8, help="The SLAM run's loop bar.")
+    args = parser.parse_args()
+    models = args.models or [BUNDLED]
+    for m in models:
+        if not m.is_file():
+            raise SystemExit(f"{m}: no such checkpoint")
+    pin_to_cores(2)
+    from vgm_studio.errors import InputError
+    from vgm_studio.matching.edges import read_edges
+    from vgm_studio.model.features import load_samples
+    from vgm_studio.model.validator import Validator
+
+    try:
+        validators = [Validator.load(m, device="cpu") for m in models]
+    except InputError as exc:
+        raise SystemExit(str(exc)) from None
+    rows = []
+    for name, log in _logs().items():
+        edges = read_edges(loops_file(name, log))
+        samples = load_samples(edges, progress=False)
+        labels = np.array([e.label or "" for e in edges], dtype=object)
+        right, wrong = int((labels == "success").sum()), int((labels == "failure").sum())
+        counts = f"{right} / {wrong}" if right + wrong else f"{len(edges)} (no reference)"
+        judged = [_judged(v.predict_samples(samples), labels, args.bar) for v in validators]
+        rows.append([name, counts, *judged])
+    print(f"# loops the bundled model's SLAM runs matched, judged at p ≥ {args.bar}")
+    print(f"# {machine()}")
+    header = ["building", "loops right / wrong"]
+    header += [f"{m.stem}: right / wrong passed / AUC" for m in models]
+    print(table(header, rows))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
