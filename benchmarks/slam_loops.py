@@ -4,7 +4,8 @@
 decided otherwise early on sends a large building's run elsewhere (BENCHMARKS.md, sessions
 15–20), so its table cannot tell a worse validator from a different path. This script holds
 the loops still. It runs ``vgm-studio slam --loops-out`` once per building with the bundled
-model (cached in build/slam-loops) and judges every matched loop with each checkpoint given:
+model (cached in build/slam-loops/<the bundled model's hash>, so a new bundled model makes
+them again) and judges every matched loop with each checkpoint given:
 per building, the right loops and the wrong ones (against the corrected poses) passed at the
 SLAM run's loop bar, and the AUC. The Freiburg hospital has no reference and, as far as its
 path shows, almost no revisit (BENCHMARKS.md, session 20): its row counts the loops passed,
@@ -14,7 +15,7 @@ The benchmark loops (``bench_generalisation.py``) are reference poses nudged by 
 guesses; these are what place recognition and the window search propose, aliases included.
 A model can rank the first better and pass more of the second's wrong loops (session 23).
 
-Run: python benchmarks/slam_loops.py [MODEL.pt ...] [--bar 0.8]
+Run: python benchmarks/slam_loops.py [MODEL.pt ...] [--bar P]   (default: the SLAM run's bar)
 """
 
 from __future__ import annotations
@@ -41,14 +42,14 @@ def _logs() -> dict[str, Path]:
     return {**logs, "fr-clinic": data / "fr-clinic" / "fr-clinic_robotlaser.clf"}
 
 
-def loops_file(name: str, log: Path) -> Path:
-    """The loops the bundled model's run of ``log`` matched, made on first use."""
-    path = OUT / f"{name}.jsonl"
+def loops_file(name: str, log: Path, out: Path) -> Path:
+    """The loops the bundled model's run of ``log`` matched, made in ``out`` on first use."""
+    path = out / f"{name}.jsonl"
     if not path.exists():
-        OUT.mkdir(parents=True, exist_ok=True)
+        out.mkdir(parents=True, exist_ok=True)
         done = subprocess.run(
             [sys.executable, "-m", "vgm_studio.tools.cmd", "slam", str(log), "--robust", "none",
-             "--loops-out", str(path), "--json", str(OUT / f"{name}.json")],
+             "--loops-out", str(path), "--json", str(out / f"{name}.json")],
             capture_output=True, text=True,
         )  # fmt: skip
         if done.returncode != 0:
@@ -71,32 +72,38 @@ def _judged(p: np.ndarray, labels: np.ndarray, bar: float) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("models", nargs="*", type=Path, help="Checkpoints (default: bundled).")
-    parser.add_argument("--bar", type=float, default=0.8, help="The SLAM run's loop bar.")
+    parser.add_argument("--bar", type=float, default=None, help="Loop bar (default: slam's).")
     args = parser.parse_args()
     models = args.models or [BUNDLED]
     for m in models:
         if not m.is_file():
             raise SystemExit(f"{m}: no such checkpoint")
     pin_to_cores(2)
+    from vgm_studio.core.hashing import content_hash
     from vgm_studio.errors import InputError
     from vgm_studio.matching.edges import read_edges
     from vgm_studio.model.features import load_samples
     from vgm_studio.model.validator import Validator
+    from vgm_studio.slam.config import ValidationConfig
 
+    bar = args.bar if args.bar is not None else ValidationConfig().loop_threshold
+    if bar is None:
+        raise SystemExit("slam has no fixed loop bar by default: give --bar")
+    out = OUT / content_hash(BUNDLED)[:12]
     try:
         validators = [Validator.load(m, device="cpu") for m in models]
     except InputError as exc:
         raise SystemExit(str(exc)) from None
     rows = []
     for name, log in _logs().items():
-        edges = read_edges(loops_file(name, log))
+        edges = read_edges(loops_file(name, log, out))
         samples = load_samples(edges, progress=False)
         labels = np.array([e.label or "" for e in edges], dtype=object)
         right, wrong = int((labels == "success").sum()), int((labels == "failure").sum())
         counts = f"{right} / {wrong}" if right + wrong else f"{len(edges)} (no reference)"
-        judged = [_judged(v.predict_samples(samples), labels, args.bar) for v in validators]
+        judged = [_judged(v.predict_samples(samples), labels, bar) for v in validators]
         rows.append([name, counts, *judged])
-    print(f"# loops the bundled model's SLAM runs matched, judged at p ≥ {args.bar}")
+    print(f"# loops the bundled model's SLAM runs matched ({out.name}), judged at p ≥ {bar}")
     print(f"# {machine()}")
     header = ["building", "loops right / wrong"]
     header += [f"{m.stem}: right / wrong passed / AUC" for m in models]
