@@ -27,34 +27,26 @@ from pathlib import Path
 
 import numpy as np
 from _common import REPO, datasets_dir, machine, pin_to_cores, table
+from bench_slam import CORRECTED, arguments, failure
 
 OUT = REPO / "build" / "slam-loops"
 BUNDLED = REPO / "assets" / "models" / "vgmnet-default.pt"
-CORRECTED = (
-    "acapulco", "belgioioso", "csail", "edmonton", "fhw", "freiburg-101", "freiburg-campus",
-    "infinite-corridor", "orebro", "seattle",
-)  # fmt: skip
+ROWS = (*CORRECTED, "fr-clinic")  # bench_slam.py's rows with a building's own loops
 
 
-def _logs() -> dict[str, Path]:
-    data = datasets_dir()
-    logs = {b: data / "radish-corrected" / f"{b}-corrected.log" for b in CORRECTED}
-    return {**logs, "fr-clinic": data / "fr-clinic" / "fr-clinic_robotlaser.clf"}
-
-
-def loops_file(name: str, log: Path, out: Path) -> Path:
-    """The loops the bundled model's run of ``log`` matched, made in ``out`` on first use."""
+def loops_file(name: str, out: Path) -> Path:
+    """The loops the bundled model's run of bench_slam.py's row ``name`` matched, made in
+    ``out`` on first use."""
     path = out / f"{name}.jsonl"
     if not path.exists():
         out.mkdir(parents=True, exist_ok=True)
         done = subprocess.run(
-            [sys.executable, "-m", "vgm_studio.tools.cmd", "slam", str(log), "--robust", "none",
-             "--loops-out", str(path), "--json", str(out / f"{name}.json")],
+            [sys.executable, "-m", "vgm_studio.tools.cmd", "slam", "--loops-out", str(path),
+             *map(str, arguments(name, out / f"{name}.json", pictures=False))],
             capture_output=True, text=True,
         )  # fmt: skip
         if done.returncode != 0:
-            lines = done.stderr.strip().splitlines()
-            raise SystemExit(f"{log}: slam failed: {lines[-1] if lines else 'no message'}")
+            raise SystemExit(f"{name}: slam failed: {failure(done.stderr)}")
     return path
 
 
@@ -78,6 +70,7 @@ def main() -> None:
     for m in models:
         if not m.is_file():
             raise SystemExit(f"{m}: no such checkpoint")
+    datasets_dir()  # the scans of every loop are read from the logs, cached or not
     pin_to_cores(2)
     from vgm_studio.core.hashing import content_hash
     from vgm_studio.errors import InputError
@@ -95,8 +88,8 @@ def main() -> None:
     except InputError as exc:
         raise SystemExit(str(exc)) from None
     rows = []
-    for name, log in _logs().items():
-        edges = read_edges(loops_file(name, log, out))
+    for name in ROWS:
+        edges = read_edges(loops_file(name, out))
         samples = load_samples(edges, progress=False)
         labels = np.array([e.label or "" for e in edges], dtype=object)
         right, wrong = int((labels == "success").sum()), int((labels == "failure").sum())
