@@ -261,7 +261,7 @@ def test_a_judge_chooses_among_headings_the_score_cannot_tell_apart():
             offered.append(list(matches))
             return np.eye(len(matches))[k if k is not None else 0]
 
-        return judge
+        return Judge(judge, bar=0.5)
 
     scan_odometry(scans, progress=False, judge=prefer(None))
     assert len(offered) == 1
@@ -276,6 +276,30 @@ def test_a_judge_chooses_among_headings_the_score_cannot_tell_apart():
         assert np.allclose(step, m.estimate, atol=1e-6)
     best = candidates[int(np.argmax(scores))]
     assert np.allclose(scan_odometry(scans, progress=False)[1], best.estimate, atol=1e-6)
+
+
+def test_a_judge_that_rejects_every_heading_leaves_the_step_that_turns_least():
+    """Where the judge accepts none of the candidates (every p under its bar), its p only
+    ranks failures: the step taken is the one that turns least, whichever it ranks first."""
+    scans = _hexagon_pair(2.0, 85.0)
+    offered: list[list[MatchResult]] = []
+
+    def rank_by_turn(first: Scan, second: Scan, matches: Sequence[MatchResult]) -> np.ndarray:
+        offered.append(list(matches))
+        # The most-turned candidate ranks first, all of them far under the bar.
+        return 0.01 + 0.01 * np.abs([m.estimate[2] for m in matches])
+
+    step = scan_odometry(scans, progress=False, judge=Judge(rank_by_turn, bar=0.5))[1]
+    candidates = offered[0]
+    assert len(candidates) >= 2
+    least = min(candidates, key=lambda m: abs(float(m.estimate[2])))
+    most = max(candidates, key=lambda m: abs(float(m.estimate[2])))
+    assert abs(float(most.estimate[2])) - abs(float(least.estimate[2])) > math.radians(5.0)
+    assert np.allclose(step, least.estimate, atol=1e-6)
+    # Over the bar, the same ranks choose: the most-turned candidate.
+    offered.clear()
+    step = scan_odometry(scans, progress=False, judge=Judge(rank_by_turn, bar=0.0))[1]
+    assert np.allclose(step, most.estimate, atol=1e-6)
 
 
 class _AliasingMatcher(LoopMatcher):

@@ -124,7 +124,7 @@ def pair_judge(config: ValidationConfig) -> Judge | None:
         a, b = first.points(), second.points()
         return rate((a, b, m.estimate, m) for m in matches)
 
-    return judge
+    return Judge(judge, rate.model.threshold)
 
 
 Pair = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], MatchResult]
