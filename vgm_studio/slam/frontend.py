@@ -389,16 +389,22 @@ class FrontEnd:
             e.kept = bool(ok)
 
     def _checked_as(self, edge: SlamEdge, factor: GraphEdge) -> GraphEdge:
-        """A sequential edge as the consistency check reads the chain: a match the validator
-        kept under the loop bar as the odometry's wide step, centred on the match.
+        """A sequential edge as the consistency check reads the chain: a match that lies
+        outside the smallest window around its odometry step and that the validator kept
+        under the loop bar reads as the odometry's wide step, centred on the match.
 
-        Such a match is kept (it is likelier right than the odometry), but a graph that held
-        it at the matcher's centimetres would call a revisit wrong for disagreeing with it. On
-        CSAIL a model that kept keyframes 322→323 at p 0.21, 0.45 m off, lost the revisit's
-        right loops 114→321 and 116→323 so, and the map 0.43 m; read so, 0.13 m (the bundled
-        model, which had rejected that step: 0.085 → 0.070 m).
+        There the match and the odometry disagree and the validator is not sure of the
+        match: the step is kept (likelier right than the odometry), but a check that held it
+        at the matcher's centimetres would call a revisit wrong for disagreeing with it. On
+        CSAIL a model that kept keyframes 322→323 at p 0.21 (0.45 m off; the odometry 14°
+        off) lost the revisit's right loops 114→321 and 116→323 so, and its map ended 0.43 m
+        off; read so, 0.11 m (the bundled model, which had rejected that step: 0.085 →
+        0.070 m). Every unsure step read so, agreeing with its odometry or not, let the
+        infinite corridor's aliases in: 0.057 → 4.9 m.
         """
         if not edge.kept or self.loop_bar is None or not edge.p_success < self.loop_bar:
+            return factor
+        if self._sequential_matcher.inside(edge):
             return factor
         wide = odometry_edge(edge.a, edge.b, self.odometry, self.graph)
         return GraphEdge(edge.a, edge.b, factor.measurement, wide.covariance, True)

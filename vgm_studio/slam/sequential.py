@@ -111,7 +111,7 @@ class SequentialMatcher:
             if not e.kept or not self._slid(e):
                 continue
             near = [n for n in (i + 1, i - 1) if 0 <= n < len(edges)]
-            inside = (n for n in near if edges[n].kept and self._inside(edges[n]))
+            inside = (n for n in near if edges[n].kept and self.inside(edges[n]))
             j = next(inside, next((n for n in near if not edges[n].kept), None))
             if j is None:
                 continue
@@ -134,7 +134,7 @@ class SequentialMatcher:
         linear, _ = _offset(edge)
         return linear > self._small_window.linear
 
-    def _inside(self, edge: SlamEdge) -> bool:
+    def inside(self, edge: SlamEdge) -> bool:
         """Whether a match lies in the smallest window around its odometry step."""
         linear, turn = _offset(edge)
         return linear <= self._small_window.linear and turn <= self._small_window.angular
@@ -197,7 +197,7 @@ class SequentialMatcher:
         wide search around standing still found −15° at p 0.79; the map ended 1.1 m off).
         """
         checked = [j for j in (i - 1, i + 1) if self._odometry_neighbour(j, edges, kept)]
-        if not checked and not self._inside(kept[i]):
+        if not checked and not self.inside(kept[i]):
             checked = [j for j in (i + 1, i - 1) if 0 <= j < len(edges)][:1]
         for j in checked:
             a, c = edges[min(i, j)].a, edges[max(i, j)].b
@@ -216,7 +216,7 @@ class SequentialMatcher:
     def _believed(self, wide: SlamEdge, loop_bar: float | None) -> bool:
         """Whether a kept wide match may say the odometry is wrong: it lies inside the
         smallest window around the odometry's step, or its p reaches the loop bar."""
-        return loop_bar is None or self._inside(wide) or wide.p_success >= loop_bar
+        return loop_bar is None or self.inside(wide) or wide.p_success >= loop_bar
 
     @staticmethod
     def _odometry_neighbour(j: int, edges: list[SlamEdge], kept: dict[int, SlamEdge]) -> bool:

@@ -1,0 +1,101 @@
+"""A sequential match the validator kept under the loop bar, as the consistency check reads it.
+
+A simulated office driven round and back, with the odometry drifting; the validator is the
+truth (every sequential match kept, a loop kept where it is right). One step inside the
+revisit is replaced by a match 0.45 m off. Kept at p 0.3 the check reads that step as the
+odometry's wide one and keeps the revisit's right loops on both sides of it; read as a sure
+step (p 0.9), it splits the revisit and the loops before it go out.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vgm_studio.core import se2
+from vgm_studio.datasets import open_log
+from vgm_studio.graph.config import GraphConfig
+from vgm_studio.matching.candidates import select_keyframes
+from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.simulation.simulate import SimConfig, simulate
+from vgm_studio.slam.config import FrontEndConfig
+from vgm_studio.slam.edges import SlamEdge
+from vgm_studio.slam.frontend import FrontEnd
+
+LOOP_BAR = 0.8
+
+
+@pytest.fixture(scope="module")
+def office(tmp_path_factory) -> tuple[list, np.ndarray, np.ndarray]:
+    """Keyframe scans, their true poses and an odometry that turns 0.4° left a step."""
+    folder: Path = tmp_path_factory.mktemp("office")
+    log = open_log(simulate(SimConfig(preset="office", seed=1, num_beams=181), folder))
+    truth = np.array([s.reference for s in log.scans])
+    keyframes = select_keyframes(truth, 0.5, 20.0)
+    truth = truth[keyframes]
+    odometry = truth[:1].copy()
+    drift = np.array([0.0, 0.0, math.radians(0.4)])
+    for step in se2.between(truth[:-1], truth[1:]):
+        odometry = np.vstack([odometry, se2.compose(odometry[-1], se2.compose(step, drift))])
+    return [log.scans[i] for i in keyframes], truth, odometry
+
+
+def _right(edge: SlamEdge, truth: np.ndarray) -> bool:
+    err = se2.between(se2.between(truth[edge.a], truth[edge.b]), edge.estimate)
+    return math.hypot(err[0], err[1]) < 0.1 and abs(err[2]) < math.radians(2.0)
+
+
+def _loops(office, bad: int | None = None, p_bad: float = 1.0) -> list[SlamEdge]:
+    scans, truth, odometry = office
+
+    def validate(edges: list[SlamEdge]) -> None:
+        for e in edges:
+            if e.kind == "loop":
+                e.kept = e.validated = _right(e, truth)
+                e.p_success = float(e.kept)
+                continue
+            e.kept = e.validated = True
+            e.p_success = 1.0
+            if bad is not None and (e.a, e.b) == (bad, bad + 1):
+                wrong = se2.compose(se2.between(truth[e.a], truth[e.b]), np.array([0, 0.45, 0]))
+                e.match = dataclasses.replace(e.match, estimate=wrong)
+                e.p_success = p_bad
+
+    config = FrontEndConfig(
+        place_candidates=0,
+        place_candidates_drifted=0,
+        sequential_submap=0,
+        sequential_slide_check=False,
+        sequential_retry=False,
+        turned_overlap=None,
+    )
+    front = FrontEnd(
+        scans, odometry, ScanMatcher(), validate, config, GraphConfig(), loop_bar=LOOP_BAR
+    )
+    return [e for e in front.run(progress=False) if e.kind == "loop"]
+
+
+def test_a_step_kept_under_the_loop_bar_does_not_split_a_revisit(office):
+    truth = office[1]
+    first = min(e.b for e in _loops(office) if e.kept)  # where the revisit begins
+    bad = first + 4
+    block = FrontEndConfig().block
+    # The block that holds the bad step: its loops are checked together.
+    start = 1 + (bad - 1) // block * block
+    stop = start + block
+
+    def before_and_after(p_bad: float) -> tuple[int, int, int]:
+        kept = [e for e in _loops(office, bad, p_bad) if e.kept]
+        assert all(_right(e, truth) for e in kept)
+        here = [e for e in kept if start <= e.b < stop]
+        return sum(e.b <= bad for e in here), sum(e.b > bad for e in here), len(kept)
+
+    unsure = before_and_after(0.3)
+    sure = before_and_after(0.9)
+    assert unsure[0] >= 3 and unsure[1] >= 3  # both sides of the step close
+    assert sure[0] == 0  # the sure wrong step vetoes the loops before it
+    assert unsure[2] > sure[2]
