@@ -407,7 +407,7 @@ class FrontEnd:
         if self._sequential_matcher.inside(edge):
             return factor
         wide = odometry_edge(edge.a, edge.b, self.odometry, self.graph)
-        return GraphEdge(edge.a, edge.b, factor.measurement, wide.covariance, True)
+        return dataclasses.replace(factor, covariance=wide.covariance)
 
     def _drift_odometry(self, edge: SlamEdge) -> GraphEdge:
         """A rejected sequential step's odometry as the loop search sees it: narrower than
