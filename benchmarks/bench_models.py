@@ -20,8 +20,10 @@ from pathlib import Path
 from _common import REPO, RGB_CPU_RECIPE, machine, pin_to_cores, table
 from edge_sets import test_edges, training_edges
 
+from vgm_studio.model.registry import BUNDLED_MODEL
+
 MODELS = REPO / "build" / "models"
-DEFAULT = REPO / "assets" / "models" / "vgmnet-default.pt"
+DEFAULT = BUNDLED_MODEL
 # The shipped models and the scripts that make them.
 SHIPPED = {"vgmnet": DEFAULT, "vgmnet-paper": REPO / "assets" / "models" / "vgmnet-paper.pt"}
 MAKERS = {"vgmnet": "train_default.py", "vgmnet-paper": "train_paper.py"}

@@ -16,7 +16,9 @@ import time
 import numpy as np
 from _common import REPO, datasets_dir, machine, median_time, pin_to_cores, table
 
-DEFAULT = REPO / "assets" / "models" / "vgmnet-default.pt"
+from vgm_studio.model.registry import BUNDLED_MODEL
+
+DEFAULT = BUNDLED_MODEL
 B = 256  # pairs per batch
 
 

@@ -13,10 +13,12 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from _common import REPO, machine, pin_to_cores, table
+from _common import machine, pin_to_cores, table
 from edge_sets import test_edges
 
-DEFAULT = REPO / "assets" / "models" / "vgmnet-default.pt"
+from vgm_studio.model.registry import BUNDLED_MODEL
+
+DEFAULT = BUNDLED_MODEL
 PRECISIONS = (0.95, 0.98, 0.99, 0.995)
 
 

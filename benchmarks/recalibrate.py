@@ -20,10 +20,12 @@ import hashlib
 import sys
 from pathlib import Path
 
-from _common import REPO, pin_to_cores
+from _common import pin_to_cores
 from edge_sets import training_edges
 
-DEFAULT = REPO / "assets" / "models" / "vgmnet-default.pt"
+from vgm_studio.model.registry import BUNDLED_MODEL
+
+DEFAULT = BUNDLED_MODEL
 KEYS = ("tp", "fp", "tn", "fn")
 
 

@@ -29,8 +29,10 @@ import numpy as np
 from _common import REPO, datasets_dir, machine, pin_to_cores, table
 from bench_slam import CORRECTED, arguments, failure
 
+from vgm_studio.model.registry import BUNDLED_MODEL
+
 OUT = REPO / "build" / "slam-loops"
-BUNDLED = REPO / "assets" / "models" / "vgmnet-default.pt"
+BUNDLED = BUNDLED_MODEL
 ROWS = (*CORRECTED, "fr-clinic")  # bench_slam.py's rows with a building's own loops
 
 

@@ -15,7 +15,9 @@ import time
 from _common import REPO, pin_to_cores
 from edge_sets import training_edges
 
-OUT = REPO / "assets" / "models" / "vgmnet-default.pt"
+from vgm_studio.model.registry import BUNDLED_MODEL
+
+OUT = BUNDLED_MODEL
 
 
 def main() -> None:
