@@ -29,6 +29,9 @@ from numpy.typing import NDArray
 
 from vgm_studio.matching.submap import PEAK, Submap
 
+# Cell indices gathered per chunk in ``_scores``: 256 KiB of scratch, reused through a search.
+_GATHER = 1 << 15
+
 
 @dataclass(frozen=True)
 class SearchWindow:
@@ -78,12 +81,16 @@ class _Window:
     """
 
     angles: NDArray[np.float64]
-    base: NDArray[np.signedinteger]
+    base: NDArray[np.intp]
     reach: int
     stride: int
     levels: tuple[NDArray[np.uint8], ...]
     guess: NDArray[np.float64]
     resolution: float
+    idx: NDArray[np.intp]
+    """Scratch for one chunk of candidates' cell indices (``_scores``)."""
+    cells: NDArray[np.uint8]
+    """…and for the cells they read."""
 
     def pose(self, a: int, x: int, y: int) -> NDArray[np.float64]:
         r = self.resolution
@@ -120,27 +127,42 @@ def _discretise(
     near = (cx + reach >= 0) & (cx - reach < nx) & (cy + reach >= 0) & (cy - reach < ny)
     stride = ny + 2 * extra
     base = np.where(near, (cx + extra) * stride + (cy + extra), reach * stride + reach)
-    small = levels[0].size < 2**31
+    rows = max(1, _GATHER // max(1, len(points)))
     return _Window(
         angles=angles,
-        base=base.astype(np.int32) if small else base,
+        base=base.astype(np.intp),
         reach=reach,
         stride=stride,
         levels=levels,
         guess=np.asarray(guess, np.float64),
         resolution=submap.resolution,
+        idx=np.empty((rows, len(points)), np.intp),
+        cells=np.empty((rows, len(points)), np.uint8),
     )
 
 
 def _scores(
     w: _Window, h: int, a: NDArray[np.intp], x: NDArray[np.intp], y: NDArray[np.intp]
 ) -> NDArray[np.int32]:
-    """Sum of level h under the scan at each candidate (angle a, shifted x, y cells)."""
-    shift: NDArray[np.signedinteger] = (x * w.stride + y).astype(w.base.dtype)
-    idx = w.base[a]
-    idx += shift[:, None]
+    """Sum of level h under the scan at each candidate (angle a, shifted x, y cells).
+
+    The gather goes through the window's scratch a chunk of candidates at a time. One gather
+    of every candidate at once allocates tens of megabytes per call, and the kernel zeroes
+    every fresh page: on CSAIL that was 37% of the SLAM run's CPU time.
+    """
+    shift = (x * w.stride + y).astype(np.intp)
     # int32 holds 255 × 8 million points, and sums a quarter faster than int64.
-    total: NDArray[np.int32] = np.take(w.levels[h], idx).sum(axis=1, dtype=np.int32)
+    total = np.empty(len(a), np.int32)
+    rows = len(w.idx)
+    for start in range(0, len(a), rows):
+        stop = min(start + rows, len(a))
+        idx, cells = w.idx[: stop - start], w.cells[: stop - start]
+        # mode="clip" skips take's bounds check and its buffered copy; the padding keeps
+        # every index inside the grid.
+        np.take(w.base, a[start:stop], axis=0, out=idx, mode="clip")
+        idx += shift[start:stop, None]
+        np.take(w.levels[h], idx, out=cells, mode="clip")
+        cells.sum(axis=1, dtype=np.int32, out=total[start:stop])
     return total
 
 
