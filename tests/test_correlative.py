@@ -200,3 +200,21 @@ def test_the_likelihood_grid_equals_a_transform_over_the_whole_grid():
         dist = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_5)
         full = np.where(dist > 3.0 * sigma, 0.0, PEAK * np.exp(-0.5 * (dist / sigma) ** 2))
         assert np.array_equal(_likelihood(cells, shape, sigma), np.rint(full).astype(np.uint8))
+
+
+def test_scores_gathered_in_chunks_equal_one_gather_of_every_candidate(office):
+    from vgm_studio.matching import branch_bound
+
+    ref = office.reference_poses()
+    sub = submap_around(office, 20)
+    points = ScanMatcher().points(office.scans[24])
+    guess = se2.between(ref[20], ref[24])
+    w = branch_bound._discretise(sub, points, guess, SearchWindow(1.0, np.radians(10)), None)
+    rng = np.random.default_rng(0)
+    count = 3 * len(w.idx) + 7  # three whole chunks and a part
+    a = rng.integers(0, len(w.angles), count)
+    x, y = (rng.integers(-w.reach, w.reach + 1, count) for _ in range(2))
+    for h in (0, 2):
+        whole = np.take(w.levels[h], w.base[a] + (x * w.stride + y)[:, None]).sum(axis=1)
+        assert np.array_equal(branch_bound._scores(w, h, a, x, y), whole)
+    assert len(w.idx) < count
