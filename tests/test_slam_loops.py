@@ -14,7 +14,7 @@ from vgm_studio.core import se2
 from vgm_studio.graph.metrics import RelationSampling, reference_relations, relation_errors
 from vgm_studio.graph.pose_graph import GraphEdge
 from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
-from vgm_studio.slam.consistency import Loop, consistent
+from vgm_studio.slam.consistency import Loop, _cycle, consistent
 from vgm_studio.slam.loop_search import window_candidates
 from vgm_studio.slam.uncertainty import UncertaintyGraph
 
@@ -346,3 +346,27 @@ def test_a_rival_group_must_hold_together_too():
         for a in (30, 32)
     ]
     assert not consistent([*right, *close], estimate, wide, config, drift=drift).any()
+
+
+@pytest.mark.parametrize("slid_first", [False, True])
+def test_of_two_equally_heavy_groups_the_one_that_agrees_best_is_kept(slid_first):
+    """A revisit's loop agrees with its right neighbour and with a neighbour slid along the
+    corridor (the chain between their ends is loose enough for both), and those two
+    disagree: two groups of the same weight. CSAIL's 114→321 with 116→323 and 116→325."""
+    truth = ring()
+    graph = chain(truth, LOOP_COV * 25)  # loose: the estimate explains all three loops
+
+    def loop(a: int, slide: float = 0.0) -> Loop:
+        z = se2.compose(se2.between(truth[a], truth[a + 90]), [slide, 0.0, 0.0])
+        return Loop(a, a + 90, z, LOOP_COV)
+
+    first, right, slid = loop(10), loop(12), loop(12, 0.3)
+    ends = [10, 12, 100, 102]
+    rel = dict(zip(ends, graph.relative(ends, len(truth)), strict=True))
+    gate = float(chi2.ppf(ConsistencyConfig().probability, 3))
+    assert _cycle(first, slid, truth, rel) < gate < _cycle(right, slid, truth, rel)
+    # networkx would take whichever group its node order finds first.
+    names = ("first", "slid", "right") if slid_first else ("first", "right", "slid")
+    loops = [{"first": first, "right": right, "slid": slid}[n] for n in names]
+    kept = dict(zip(names, consistent(loops, truth, graph).tolist(), strict=True))
+    assert kept == {"first": True, "right": True, "slid": False}
