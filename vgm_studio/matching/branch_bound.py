@@ -148,7 +148,8 @@ def _scores(
 
     The gather goes through the window's scratch a chunk of candidates at a time. One gather
     of every candidate at once allocates tens of megabytes per call, and the kernel zeroes
-    every fresh page: on CSAIL that was 37% of the SLAM run's CPU time.
+    every fresh page: on a newly started machine, whose pages are dear, that was 37% of a
+    CSAIL SLAM run's CPU time.
     """
     shift = (x * w.stride + y).astype(np.intp)
     # int32 holds 255 × 8 million points, and sums a quarter faster than int64.
