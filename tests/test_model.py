@@ -381,8 +381,10 @@ def test_train_command_defaults_are_the_train_config_defaults():
 def test_cells_path_trains_as_the_dense_network(occupancy):
     """A training step through the occupied cells gives the dense network's loss, gradients
     and batch-norm running statistics (the stem's batch statistics count the empty positions
-    in closed form). The reference is the dense network in float64: in float32 its own
-    batch-norm backward is 2% off it on 12 pairs, the cells path 0.2%."""
+    in closed form). The reference is the dense network in float64. In float32 the dense
+    network's own batch-norm backward is up to 11% off it on 12 pairs, and how far depends
+    on the threads' summation order; the cells path must be no farther off than that, or
+    within 0.5% (it is within 0.01% on two threads, 5% on one)."""
     import copy
 
     from vgm_studio.model.registry import build_network
@@ -391,6 +393,7 @@ def test_cells_path_trains_as_the_dense_network(occupancy):
     torch.manual_seed(2)
     cells, hyper = build_network("vgmnet", {"figures": True, "occupancy": occupancy})
     dense = copy.deepcopy(cells).double()
+    dense32 = copy.deepcopy(cells)
     spec = input_spec("vgmnet", hyper, VGMParams())
     samples = random_samples(12, seed=5)
     empty = np.zeros((0, 2), np.float32)
@@ -400,22 +403,27 @@ def test_cells_path_trains_as_the_dense_network(occupancy):
     x, extra = spec.tensors(samples, torch.device("cpu"), turns)
     assert extra is not None
     losses = []
-    for net in (dense, cells):
+    for net in (dense, dense32, cells):
         net.train()
-        torch.manual_seed(3)  # the same dropout mask on both paths
+        torch.manual_seed(3)  # the same dropout mask on every path
         if net is dense:
             logits = forward(net, x.double(), extra.double())
+        elif net is dense32:
+            logits = forward(net, x, extra).double()
         else:
             logits = network_logits(net, spec, samples, torch.device("cpu"), turns).double()
         loss = torch.nn.functional.binary_cross_entropy_with_logits(logits, target)
         loss.backward()
         losses.append(float(loss.detach()))
-    assert abs(losses[0] - losses[1]) < 1e-5
-    for (name, want), got in zip(dense.named_parameters(), cells.parameters(), strict=True):
-        assert want.grad is not None and got.grad is not None
+    assert abs(losses[0] - losses[2]) < 1e-5
+    params = zip(dense.named_parameters(), dense32.parameters(), cells.parameters(), strict=True)
+    for (name, want), plain, got in params:
+        assert want.grad is not None and plain.grad is not None and got.grad is not None
         scale = float(want.grad.abs().max())
         assert scale > 1e-6, name  # every layer learns, so the comparison says something
-        assert float((got.grad.double() - want.grad).abs().max()) < 5e-3 * scale, name
+        float32_error = float((plain.grad.double() - want.grad).abs().max())
+        error = float((got.grad.double() - want.grad).abs().max())
+        assert error <= max(5e-3 * scale, float32_error), name
     for (name, want), got in zip(dense.named_buffers(), cells.buffers(), strict=True):
         np.testing.assert_allclose(
             got.double().numpy(), want.numpy(), rtol=1e-4, atol=1e-6, err_msg=name
