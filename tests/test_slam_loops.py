@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from functools import partial
 
+import networkx as nx
 import numpy as np
 import pytest
 from scipy.stats import chi2
@@ -370,3 +371,19 @@ def test_of_two_equally_heavy_groups_the_one_that_agrees_best_is_kept(slid_first
     loops = [{"first": first, "right": right, "slid": slid}[n] for n in names]
     kept = dict(zip(names, consistent(loops, truth, graph).tolist(), strict=True))
     assert kept == {"first": True, "right": True, "slid": False}
+
+
+def test_a_tangle_of_groups_falls_back_to_the_exact_search(monkeypatch):
+    """The complement of disjoint triangles has 3^(n/3) maximal cliques: past the cap the
+    enumeration stops, and the exact search still finds the heaviest, enumerated last."""
+    from vgm_studio.slam import consistency
+
+    tangle = nx.complement(nx.disjoint_union_all([nx.complete_graph(3)] * 4))
+    cliques = list(nx.find_cliques(tangle))
+    assert len(cliques) == 81
+    heaviest = sorted(cliques[-1])
+    nx.set_node_attributes(tangle, {n: 3 if n in heaviest else 2 for n in tangle}, "weight")
+    nx.set_edge_attributes(tangle, 1.0, "chi2")
+    for cap in (10, 1000):
+        monkeypatch.setattr(consistency, "_MAX_CLIQUES", cap)
+        assert sorted(consistency._heaviest(tangle)) == heaviest
