@@ -185,8 +185,8 @@ def _nudged(runs: list[dict]) -> str:
 
 def row(name: str, d: dict, nudged: list[dict] | None = None) -> list[str]:
     if "error" in d:
-        # The error in the "after" column, the other eight (nine) left blank.
-        return [name, d["error"][:60], *[""] * (8 if nudged is None else 9)]
+        # The error in the "after" column, the other nine (ten) left blank.
+        return [name, d["error"][:60], *[""] * (9 if nudged is None else 10)]
     by = d["loops_by_source"]
     false = (
         f"{d['injected_false_loops_kept']}/{d['injected_false_loops']}" if by["injected"] else ""
@@ -198,6 +198,7 @@ def row(name: str, d: dict, nudged: list[dict] | None = None) -> list[str]:
         _err(d.get("before")),
         str(by["window"]),
         str(by["place"]),
+        str(by.get("sweep", "")),
         str(d["loops_validator_kept"]),
         str(d["loops_kept"]),
         false,
@@ -326,6 +327,7 @@ def main() -> None:
         "before (mean ± std)",
         "by window",
         "by place",
+        "by final sweep",
         "validator kept",
         "kept after consistency",
         "false kept",

@@ -190,7 +190,10 @@ def test_recording_reads_back_with_every_entity(runs):
     assert inconsistent == doc["loops_consistency_rejected"]
     loops = [e for e in doc["edges"] if e["kind"] == "loop"]
     assert len(loops) == doc["loops_total"] and len(doc["edges"]) == doc["edges_total"]
-    assert {e["source"] for e in loops} <= {"window", "place", "injected"}
+    assert {e["source"] for e in loops} <= {"window", "place", "sweep", "injected"}
+    assert doc["loops_by_source"] == {
+        s: sum(e["source"] == s for e in loops) for s in ("window", "place", "sweep", "injected")
+    }
     assert sum(e["source"] == "injected" for e in loops) == FALSE_LOOPS
     assert all(e["consistency"] == "not-checked" for e in loops if e["validator"] == "rejected")
     assert sum(e["validator"] == "kept" for e in loops) == doc["loops_validator_kept"]

@@ -16,7 +16,7 @@ from vgm_studio.graph.metrics import RelationSampling, reference_relations, rela
 from vgm_studio.graph.pose_graph import GraphEdge
 from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
 from vgm_studio.slam.consistency import Loop, _cycle, consistent
-from vgm_studio.slam.loop_search import window_candidates
+from vgm_studio.slam.loop_search import unclosed_candidates, window_candidates
 from vgm_studio.slam.uncertainty import UncertaintyGraph
 
 STEP_COV = np.diag([0.005**2, 0.005**2, math.radians(0.03) ** 2])
@@ -387,3 +387,40 @@ def test_a_tangle_of_groups_falls_back_to_the_exact_search(monkeypatch):
     for cap in (10, 1000):
         monkeypatch.setattr(consistency, "_MAX_CLIQUES", cap)
         assert sorted(consistency._heaviest(tangle)) == heaviest
+
+
+def test_the_final_sweep_searches_only_revisits_left_unclosed():
+    """Down a corridor and back along it: the way back passes every keyframe of the way out.
+    With the loops of the back half's first stretch kept, the sweep proposes candidates on
+    the rest of the way back only, none joining the neighbourhoods of a kept loop."""
+    poses = out_and_back(length=50.0)
+    graph = chain(poses)
+    config = FrontEndConfig()
+    count, span = len(poses), config.submap_keyframes
+    every = window_candidates(range(count), poses, graph, config)
+    assert every  # the way back is a revisit throughout
+    nothing_closed = np.zeros((0, 2), np.int64)
+    pairs = [(c.a, c.b) for c in every]
+    assert [(c.a, c.b) for c in unclosed_candidates(nothing_closed, poses, graph, config)] == pairs
+    closed = np.array([(count - 1 - b, b) for b in range(count // 2, count // 2 + 40, 4)])
+    swept = unclosed_candidates(closed, poses, graph, config)
+    assert swept and len(swept) < len(every)
+    assert {(c.a, c.b) for c in swept} <= set(pairs)
+    for c in swept:
+        assert np.abs(closed[:, 1] - c.b).min() > span  # b is far from every kept loop's end
+    # Every keyframe of the way back that no kept loop reaches is searched again.
+    lonely = [b for b in range(count) if np.abs(closed[:, 1] - b).min() > span]
+    assert {c.b for c in swept} == {c.b for c in every if c.b in lonely}
+    # Where the estimate has not moved since a keyframe's online search, the sweep would
+    # repeat it: nothing to search. Where it has, by more than the smallest window, it does.
+    assert (
+        unclosed_candidates(
+            nothing_closed, poses, graph, config, dict.fromkeys(range(count), poses)
+        )
+        == []
+    )
+    shifted = poses.copy()
+    shifted[count // 2 :, 0] += 2 * config.window_linear[0]
+    then = dict.fromkeys(range(count), shifted)
+    again = unclosed_candidates(nothing_closed, poses, graph, config, then)
+    assert [(c.a, c.b) for c in again] == pairs

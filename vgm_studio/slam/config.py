@@ -113,6 +113,11 @@ class FrontEndConfig:
             loop is right (AUC 0.94–0.97 on FHW, CSAIL and Belgioioso).
         block: Keyframes added between two updates of the running estimate: the validator
             and the incremental solver work on whole blocks.
+        final_sweep: After the last block, search once more, from the final estimate, the
+            revisits the run never closed (``loop_search.unclosed_candidates``): a revisit met
+            before the loops that straighten the map went in was searched where the
+            estimate then put it. Its loops face the validator and the consistency check as
+            any window loop does.
         false_loops: Deliberately wrong loop closures to inject (robustness tests in the style
             of Sünderhauf and Protzel): pairs of keyframes at least ``false_loop_distance``
             apart, matched from a guess that claims they are at the same place.
@@ -153,6 +158,7 @@ class FrontEndConfig:
     turned_loops_per_keyframe: int = 1
     turned_overlap: float | None = 0.7
     block: int = 25
+    final_sweep: bool = True
     false_loops: int = 0
     false_loop_distance: float = 5.0
     seed: int = 0

@@ -35,7 +35,13 @@ from vgm_studio.matching.submap import Submap
 from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
 from vgm_studio.slam.consistency import Loop, consistent
 from vgm_studio.slam.edges import SlamEdge, SlamEdgeKind, Validate
-from vgm_studio.slam.loop_search import Candidate, place_candidates, trail, window_candidates
+from vgm_studio.slam.loop_search import (
+    Candidate,
+    place_candidates,
+    trail,
+    unclosed_candidates,
+    window_candidates,
+)
 from vgm_studio.slam.sequential import SequentialMatcher
 from vgm_studio.slam.turned import is_turned, trail_overlap
 from vgm_studio.slam.uncertainty import UncertaintyGraph
@@ -170,6 +176,8 @@ class FrontEnd:
         self.estimate = RunningEstimate(odometry[0], graph)
         self.edges: list[SlamEdge] = []
         self._false = false_loop_pairs(odometry, config) if config.false_loops else {}
+        # Keyframe → the estimate its loop search read (the final sweep's baseline).
+        self._searched: dict[int, NDArray[np.float64]] = {}
         self._noise = np.random.default_rng([config.seed, 3])
 
     def run(self, progress: bool = True) -> list[SlamEdge]:
@@ -189,6 +197,8 @@ class FrontEnd:
                     loops=sum(e.kind == "loop" for e in self.edges),
                     kept=sum(e.kind == "loop" and e.kept for e in self.edges),
                 )
+            if self.config.final_sweep:
+                self._sweep()
         self._pool = None
         bar.close()
         return self.edges
@@ -237,7 +247,8 @@ class FrontEnd:
     def _loops(self, block: range) -> None:
         # Submaps are placed by the estimate, which moves when loops close: built per block.
         self._submaps.clear()
-        poses = self.estimate.poses
+        poses = self.estimate.poses.copy()
+        self._searched.update(dict.fromkeys(block, poses))
         candidates = window_candidates(block, poses, self._uncertainty, self.config)
         # Place recognition where the window search cannot be trusted to hold the place: no
         # candidate, or a window clamped smaller than the drift (a revisit the estimate has
@@ -253,6 +264,25 @@ class FrontEnd:
         candidates += self._place_candidates(unseen, cfg.place_candidates, trails)
         candidates += self._place_candidates(drifted, cfg.place_candidates_drifted, trails)
         candidates += self._injected(block)
+        self._close(candidates, poses)
+        for b in block:
+            self._places.add(b, self.scans[b].points())
+            if trails:
+                self._trails.add(b, trails[b])
+
+    def _sweep(self) -> None:
+        """The revisits the run never closed, searched once more from the final estimate
+        (``loop_search.unclosed_candidates``)."""
+        self._submaps.clear()
+        closed = np.array(
+            [(e.a, e.b) for e in self.edges if e.kind == "loop" and e.kept], dtype=np.int64
+        )
+        poses = self.estimate.poses
+        found = unclosed_candidates(closed, poses, self._uncertainty, self.config, self._searched)
+        self._close([dataclasses.replace(c, source="sweep") for c in found], poses)
+
+    def _close(self, candidates: list[Candidate], poses: NDArray[np.float64]) -> None:
+        """Matches, validates and checks ``candidates``, and adds the loops kept."""
         # Submaps first (shared by candidates), then the matches, both on every thread: the
         # searches are numpy gathers that release the GIL, and each match is independent.
         unique = {self._submap_key(c.a, c.b): c for c in candidates}
@@ -268,10 +298,6 @@ class FrontEnd:
         for e in kept:
             self._add(graph_edge(e, self.graph))
         self.edges.extend(edges)
-        for b in block:
-            self._places.add(b, self.scans[b].points())
-            if trails:
-                self._trails.add(b, trails[b])
         if kept:
             self.estimate.update(extra_iterations=2)
 
@@ -291,7 +317,8 @@ class FrontEnd:
         match = self.loop_matcher.config.match
         for e in edges:
             # Injected false loops stand for wrong window loops: they face the rule too.
-            if e.kept or e.source not in ("window", "injected") or e.match.covariance is None:
+            searched = e.source in ("window", "sweep", "injected")
+            if e.kept or not searched or e.match.covariance is None:
                 continue
             if not is_turned(e, cfg.loop_max_angle_deg):
                 continue
@@ -341,7 +368,8 @@ class FrontEnd:
         cfg = self.config
         wide = SearchWindow(c.linear, c.angular)
         small = SearchWindow(cfg.window_linear[0], math.radians(cfg.window_angular_deg[0]))
-        if c.source != "window" or (c.linear <= small.linear and c.angular <= small.angular):
+        by_window = c.source in ("window", "sweep")
+        if not by_window or (c.linear <= small.linear and c.angular <= small.angular):
             result = self.loop_matcher.match(submap, target, scan, c.guess, wide)
         else:
             result = self.loop_matcher.match(submap, target, scan, c.guess, small)

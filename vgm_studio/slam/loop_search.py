@@ -22,7 +22,7 @@ the descriptor's yaw.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -67,19 +67,69 @@ def _clamp(value: float, bounds: tuple[float, float]) -> float:
 
 
 def window_candidates(
-    block: range, poses: NDArray[np.float64], graph: UncertaintyGraph, config: FrontEndConfig
+    block: Sequence[int],
+    poses: NDArray[np.float64],
+    graph: UncertaintyGraph,
+    config: FrontEndConfig,
 ) -> list[Candidate]:
     """The window candidates of each keyframe of ``block``, nearest (by Mahalanobis) first."""
-    if block.stop - 1 - config.loop_min_gap < 0 or config.loops_per_keyframe == 0:
+    keyframes = [b for b in block if b - config.loop_min_gap >= 0]
+    if not keyframes or config.loops_per_keyframe == 0:
         return []
     gate = float(chi2.ppf(config.loop_gate, 2))
     # With no uncertainty the gate reaches exactly loop_radius.
     reach_var = config.loop_radius**2 / gate
     out: list[Candidate] = []
-    keyframes = [b for b in block if b - config.loop_min_gap >= 0]
     for b, rel in zip(keyframes, graph.relative(keyframes, len(poses)), strict=True):
         out += _window_of(b, poses, rel, gate, reach_var, config)
     return out
+
+
+def unclosed_candidates(
+    closed: NDArray[np.int64],
+    poses: NDArray[np.float64],
+    graph: UncertaintyGraph,
+    config: FrontEndConfig,
+    searched: Mapping[int, NDArray[np.float64]] | None = None,
+) -> list[Candidate]:
+    """Window candidates, on the run's final estimate, of the revisits it never closed.
+
+    A keyframe is searched again where no kept loop ends within ``submap_keyframes`` of it,
+    and a candidate a → b is kept where no kept loop joins a's neighbourhood to b's and the
+    estimate has since moved b relative to a by more than the smallest window (else the
+    search would repeat the one made online). Online, each keyframe was searched once, from
+    where the estimate put it then; a revisit met before the loops that straighten the map
+    went in was searched in the wrong place. On CSAIL a validator that closed its central
+    ring late left the revisits 120–135 ↔ 197–213 open so (0.131 m).
+
+    Args:
+        closed: (L, 2) keyframes (a, b) of the loops kept.
+        poses: (K, 3) the final estimate.
+        graph: The loop search's view of the graph (the drift), loops included.
+        config: The window search's settings.
+        searched: Keyframe b → the estimate its online search read (None: every candidate
+            counts as moved).
+    """
+    span = config.submap_keyframes
+    ends = np.asarray(closed, dtype=np.int64).reshape(-1, 2)
+    keyframes = np.arange(len(poses))
+    lonely = ~(np.abs(keyframes[:, None] - ends[None, :, 1]) <= span).any(axis=1)
+    found = window_candidates(keyframes[lonely].tolist(), poses, graph, config)
+    linear, angular = config.window_linear[0], math.radians(config.window_angular_deg[0])
+
+    def moved(c: Candidate) -> bool:
+        if searched is None or c.b not in searched:
+            return True
+        then = searched[c.b]
+        change = se2.between(se2.between(then[c.a], then[c.b]), c.guess)
+        return bool(math.hypot(change[0], change[1]) > linear or abs(change[2]) > angular)
+
+    return [
+        c
+        for c in found
+        if moved(c)
+        and not ((np.abs(ends[:, 0] - c.a) <= span) & (np.abs(ends[:, 1] - c.b) <= span)).any()
+    ]
 
 
 def _window_of(

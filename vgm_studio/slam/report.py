@@ -19,7 +19,7 @@ from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.pipeline import SlamResult
 
 TRAJECTORIES = ("odometry", "before", "after")
-_SOURCES = ("window", "place", "injected")
+_SOURCES = ("window", "place", "sweep", "injected")
 
 
 def keyframe_trajectories(result: SlamResult) -> dict[str, NDArray[np.float64]]:
@@ -98,9 +98,7 @@ class EdgeCounts:
             loops_kept=sum(e.kept for e in loops),
             injected=len(injected),
             injected_kept=sum(e.kept for e in injected),
-            by_source={
-                s: sum(e.source == s for e in loops) for s in ("window", "place", "injected")
-            },
+            by_source={s: sum(e.source == s for e in loops) for s in _SOURCES},
             validated=sum(e.validated for e in loops),
             consistency_rejected=sum(e.consistency == "rejected" for e in loops),
         )
@@ -202,7 +200,8 @@ def edge_line(result: SlamResult) -> str:
     text = (
         f"edges: {c.total} matched, {c.kept} kept, {c.rejected} rejected; "
         f"loops: {c.loops} proposed ({c.by_source['window']} by window, "
-        f"{c.by_source['place']} by place), {c.validated} passed the validator, "
+        f"{c.by_source['place']} by place, {c.by_source['sweep']} by the final sweep), "
+        f"{c.validated} passed the validator, "
         f"{c.loops_kept} kept after the consistency check"
     )
     if c.injected:
