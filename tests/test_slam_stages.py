@@ -226,3 +226,19 @@ def test_a_run_too_short_to_propose_a_loop_says_so(tmp_path, capsys):
     said = capsys.readouterr()
     assert "loops: 0 proposed" in said.out
     assert f"{log}: no loop proposed over" in said.err
+
+
+def test_every_loop_source_has_a_colour_on_the_edges_map_and_in_the_recording():
+    """A source with no colour fails where the edges map orders its loops (a final sweep
+    once stopped the infinite corridor's run so)."""
+    from typing import get_args
+
+    from vgm_studio.recording.record import COLOURS
+    from vgm_studio.slam.edges import EdgeSource
+    from vgm_studio.slam.report import LOOP_COLOURS
+
+    sources = set(get_args(EdgeSource)) - {"odometry", "injected"}
+    assert {"window", "place", "sweep"} <= sources
+    for source in sources:
+        assert f"kept ({source})" in LOOP_COLOURS and source in COLOURS, source
+    assert len(set(LOOP_COLOURS.values())) == len(LOOP_COLOURS)

@@ -39,7 +39,7 @@ COLOURS = {
     "sequential": (90, 200, 120),
     "window": (40, 120, 255),
     "place": (20, 200, 200),
-    "sweep": (120, 80, 255),
+    "sweep": (150, 90, 255),
     "rejected": (230, 40, 40),
     "inconsistent": (255, 150, 0),
     "injected": (220, 40, 220),

@@ -47,6 +47,7 @@ LOOP_COLOURS: dict[str, tuple[int, int, int]] = {
     "injected, kept": (220, 40, 220),
     "kept (window)": (40, 120, 255),
     "kept (place)": (20, 170, 60),
+    "kept (sweep)": (150, 90, 255),
 }
 
 
