@@ -32,7 +32,7 @@ class HyperFlags:
     occupancy: bool = False
     spread: bool | None = None
     inliers: bool = True
-    blind: bool = False
+    blind: bool = True
 
 
 @dataclass(frozen=True)
@@ -90,7 +90,7 @@ def _vgmnet_hyper(flags: HyperFlags) -> dict[str, Any]:
         "occupancy": flags.occupancy,
         "spread": flags.figures and flags.spread is not False,
         "inliers": flags.inliers,
-        "blind": flags.blind,
+        "blind": flags.figures and flags.blind,
     }
 
 

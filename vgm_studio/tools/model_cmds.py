@@ -53,12 +53,13 @@ def train(
         ),
     ] = HyperFlags.inliers,
     blind_head: Annotated[
-        bool,
+        bool | None,
         typer.Option(
             help="vgmnet: a second head that judges without the figures; the logit is the "
-            "mean of the two."
+            "mean of the two.",
+            show_default="on with the figures",
         ),
-    ] = HyperFlags.blind,
+    ] = None,
     cell_size: Annotated[
         float,
         typer.Option(
@@ -94,7 +95,9 @@ def train(
             "with --no-spread too it leaves no figures to read; use --no-figures",
             param_hint="--no-inliers",
         )
-    if blind_head and not figures:
+    # Unasked, the bundled model's choice (``HyperFlags.blind``), which --no-figures drops.
+    blind = HyperFlags.blind if blind_head is None else blind_head
+    if blind_head is True and not figures:
         raise typer.BadParameter(
             "is a second head beside the one that reads the figures; drop --no-figures",
             param_hint="--blind-head",
@@ -114,7 +117,7 @@ def train(
         device=device.value,
         threads=threads,
         init=None if init is None else str(init),
-        hyper=entry(model).hyper(HyperFlags(figures, occupancy, spread, inliers, blind_head)),
+        hyper=entry(model).hyper(HyperFlags(figures, occupancy, spread, inliers, blind)),
         vgm=VGMParams(resolution=cell_size),
     )
     typer.echo(train_model(edges, out, config, warn=lambda line: typer.echo(line, err=True)))
