@@ -198,6 +198,7 @@ class FrontEnd:
                     kept=sum(e.kind == "loop" and e.kept for e in self.edges),
                 )
             if self.config.final_sweep:
+                bar.set_description("front end, final sweep")
                 self._sweep()
         self._pool = None
         bar.close()

@@ -17,6 +17,9 @@ of its trail, the scan and those of the last metres of the path placed by the es
 is sure of a few metres even where it has lost the building. Neither reads where the estimate
 puts the keyframe, so a revisit is proposed even tens of metres off. Its window is centred on
 the descriptor's yaw.
+
+Sweep: after the run, the window search once more from the final estimate, for the revisits
+no kept loop closed (``unclosed_candidates``).
 """
 
 from __future__ import annotations
