@@ -40,13 +40,14 @@ from vgm_studio.model.registry import HyperFlags, entry
 
 NETWORKS = ("vgmnet", "rgb-baseline")
 # ``--inputs``: what ``vgmnet`` reads besides the VGM, as ``vgm-studio train``'s switches
-# (``--no-figures``, ``--no-inliers``, ``--blind-head``); an ablation's fold models are kept
-# beside the default's.
+# (``--no-figures``, ``--no-inliers``, ``--no-blind-head``); an ablation's fold models are kept
+# beside the default's. Until session 25 the default had no blind head and ``blind-head`` was
+# the ablation: those draws are ``default`` now, and the old default is ``no-blind-head``.
 INPUTS: dict[str, HyperFlags] = {
     "default": HyperFlags(),
     "no-figures": HyperFlags(figures=False),
-    "variances": HyperFlags(inliers=False),
-    "blind-head": HyperFlags(blind=True),
+    "variances": HyperFlags(inliers=False, blind=False),
+    "no-blind-head": HyperFlags(blind=False),
 }
 
 

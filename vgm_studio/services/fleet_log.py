@@ -210,7 +210,7 @@ def slam_columns(doc: dict[str, Any]) -> dict[str, Any]:
         "loops_validator_kept": doc.get("loops_validator_kept"),
         "loops_consistency_rejected": doc.get("loops_consistency_rejected"),
     }
-    for source in ("window", "place"):
+    for source in ("window", "place", "sweep"):
         cols[f"loops_by_{source}"] = (doc.get("loops_by_source") or {}).get(source)
     for trajectory in ("odometry", "before", "after"):
         errors = doc.get(trajectory) or {}

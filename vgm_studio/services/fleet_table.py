@@ -46,6 +46,7 @@ _COLUMNS: tuple[tuple[str, str], ...] = (
     ("loops_consistency_rejected", "int64"),
     ("loops_by_window", "int64"),
     ("loops_by_place", "int64"),
+    ("loops_by_sweep", "int64"),
     ("odometry_trans_mean_m", "float64"),
     ("odometry_rot_mean_deg", "float64"),
     ("before_trans_mean_m", "float64"),

@@ -131,6 +131,8 @@ def _heaviest(votes: nx.Graph) -> list[int]:
             # search rather than enumerate every maximal clique.
             return list(nx.max_weight_clique(votes, weight="weight")[0])
         weight = sum(votes.nodes[i]["weight"] for i in clique)
+        if weight < key[0]:
+            continue
         spread = sum(votes.edges[i, j]["chi2"] for i, j in combinations(clique, 2))
         if (weight, -spread) > key:
             best, key = clique, (weight, -spread)

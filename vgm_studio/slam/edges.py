@@ -14,7 +14,8 @@ from vgm_studio.matching.matcher import MatchResult
 
 SlamEdgeKind = Literal["sequential", "loop"]
 # Where a candidate came from: odometry (sequential edges), the uncertainty window around the
-# estimate, place recognition, or a deliberately false loop (``--inject-false-loops``).
+# estimate, place recognition, the final sweep on the last estimate, or a deliberately false
+# loop (``--inject-false-loops``).
 EdgeSource = Literal["odometry", "window", "place", "sweep", "injected"]
 Consistency = Literal["kept", "rejected", "not-checked"]
 

@@ -176,7 +176,8 @@ class FrontEnd:
         self.estimate = RunningEstimate(odometry[0], graph)
         self.edges: list[SlamEdge] = []
         self._false = false_loop_pairs(odometry, config) if config.false_loops else {}
-        # Keyframe → the estimate its loop search read (the final sweep's baseline).
+        # Keyframe → the estimate its loop search read (the final sweep's baseline): a copy
+        # per block, about 1 MB over Intel's 1,496 keyframes, growing with the run's square.
         self._searched: dict[int, NDArray[np.float64]] = {}
         self._noise = np.random.default_rng([config.seed, 3])
 

@@ -117,7 +117,13 @@ def unclosed_candidates(
     ends = np.asarray(closed, dtype=np.int64).reshape(-1, 2)
     keyframes = np.arange(len(poses))
     lonely = ~(np.abs(keyframes[:, None] - ends[None, :, 1]) <= span).any(axis=1)
-    found = window_candidates(keyframes[lonely].tolist(), poses, graph, config)
+    # A block at a time, as online: the projection holds a K-long array per keyframe asked.
+    unclosed = keyframes[lonely].tolist()
+    found = [
+        c
+        for start in range(0, len(unclosed), config.block)
+        for c in window_candidates(unclosed[start : start + config.block], poses, graph, config)
+    ]
     linear, angular = config.window_linear[0], math.radians(config.window_angular_deg[0])
 
     def moved(c: Candidate) -> bool:
