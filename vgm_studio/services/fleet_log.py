@@ -29,6 +29,7 @@ from vgm_studio.model.metrics import binary_metrics
 from vgm_studio.services.candidates import make_edge_file
 from vgm_studio.services.slam import SlamOutputs, run_slam_command
 from vgm_studio.slam.config import SlamConfig
+from vgm_studio.slam.edges import LOOP_SOURCES
 
 # Bumped when a row's meaning changes, so older rows are made again rather than mixed in.
 ROW_FORMAT = 1
@@ -210,7 +211,7 @@ def slam_columns(doc: dict[str, Any]) -> dict[str, Any]:
         "loops_validator_kept": doc.get("loops_validator_kept"),
         "loops_consistency_rejected": doc.get("loops_consistency_rejected"),
     }
-    for source in ("window", "place", "sweep"):
+    for source in LOOP_SOURCES:
         cols[f"loops_by_{source}"] = (doc.get("loops_by_source") or {}).get(source)
     for trajectory in ("odometry", "before", "after"):
         errors = doc.get(trajectory) or {}

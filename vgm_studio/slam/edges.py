@@ -17,6 +17,11 @@ SlamEdgeKind = Literal["sequential", "loop"]
 # estimate, place recognition, the final sweep on the last estimate, or a deliberately false
 # loop (``--inject-false-loops``).
 EdgeSource = Literal["odometry", "window", "place", "sweep", "injected"]
+# The sources of real loops, as the JSON, the fleet table and the maps count them.
+LOOP_SOURCES: tuple[EdgeSource, ...] = ("window", "place", "sweep")
+# Loops searched for around the estimate (online or in the final sweep): matched in the
+# smallest window first, and turned ones judged by their local maps.
+WINDOW_SOURCES: tuple[EdgeSource, ...] = ("window", "sweep")
 Consistency = Literal["kept", "rejected", "not-checked"]
 
 

@@ -34,7 +34,7 @@ from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.matching.submap import Submap
 from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
 from vgm_studio.slam.consistency import Loop, consistent
-from vgm_studio.slam.edges import SlamEdge, SlamEdgeKind, Validate
+from vgm_studio.slam.edges import WINDOW_SOURCES, SlamEdge, SlamEdgeKind, Validate
 from vgm_studio.slam.loop_search import (
     Candidate,
     place_candidates,
@@ -319,7 +319,7 @@ class FrontEnd:
         match = self.loop_matcher.config.match
         for e in edges:
             # Injected false loops stand for wrong window loops: they face the rule too.
-            searched = e.source in ("window", "sweep", "injected")
+            searched = e.source in WINDOW_SOURCES or e.injected
             if e.kept or not searched or e.match.covariance is None:
                 continue
             if not is_turned(e, cfg.loop_max_angle_deg):
@@ -370,7 +370,7 @@ class FrontEnd:
         cfg = self.config
         wide = SearchWindow(c.linear, c.angular)
         small = SearchWindow(cfg.window_linear[0], math.radians(cfg.window_angular_deg[0]))
-        by_window = c.source in ("window", "sweep")
+        by_window = c.source in WINDOW_SOURCES
         if not by_window or (c.linear <= small.linear and c.angular <= small.angular):
             result = self.loop_matcher.match(submap, target, scan, c.guess, wide)
         else:

@@ -15,11 +15,11 @@ from vgm_studio.datasets.scans import ScanLog
 from vgm_studio.graph.metrics import RelationErrors, relation_errors
 from vgm_studio.maps.config import MapConfig
 from vgm_studio.maps.occupancy import OccupancyGrid, build_map
-from vgm_studio.slam.edges import SlamEdge
+from vgm_studio.slam.edges import LOOP_SOURCES, SlamEdge
 from vgm_studio.slam.pipeline import SlamResult
 
 TRAJECTORIES = ("odometry", "before", "after")
-_SOURCES = ("window", "place", "sweep", "injected")
+_SOURCES = (*LOOP_SOURCES, "injected")
 
 
 def keyframe_trajectories(result: SlamResult) -> dict[str, NDArray[np.float64]]:
