@@ -51,8 +51,10 @@ INPUTS: dict[str, HyperFlags] = {
 }
 
 
-def _stem(building: str, model: str, seed: int, inputs: str) -> str:
+def _stem(building: str, model: str, seed: int, inputs: str, cell: float | None = None) -> str:
     tag = f"{model}-{inputs}" if model == "vgmnet" and inputs != "default" else model
+    if model == "vgmnet" and cell:
+        tag += f"-cell{cell:g}"  # another grid's fold models sit beside the paper grid's
     return f"{building}-{tag}-seed{seed}"
 
 
@@ -100,7 +102,7 @@ def _job(job: tuple[str, str, int]) -> str:
     building, model, seed = job
     loaded = _LOADED[0]
     args = loaded.args
-    result = Path(args.out) / f"{_stem(building, model, seed, args.inputs)}.json"
+    result = Path(args.out) / f"{_stem(building, model, seed, args.inputs, args.cell)}.json"
     if result.exists():
         return f"{result.stem}: done before"
     torch.set_num_threads(args.threads)
@@ -111,6 +113,7 @@ def _job(job: tuple[str, str, int]) -> str:
         model,
         args.epochs,
         args.epoch_size,
+        cell=args.cell,
         inputs=INPUTS[args.inputs],  # rgb-baseline has no switches: the same network
         seed=seed,
         device=args.device,
@@ -132,6 +135,7 @@ def _job(job: tuple[str, str, int]) -> str:
             "model": model,
             "seed": seed,
             "inputs": args.inputs if model == "vgmnet" else "default",
+            "cell": args.cell if model == "vgmnet" else None,
             "threshold": checkpoint.threshold,
             "p": [round(float(p), 6) for p in probs],
             "labels": test.labels.tolist(),
@@ -181,11 +185,15 @@ def _train_all(args: argparse.Namespace) -> None:
         pool.join()
 
 
-def _summary(out: Path, turns: int, inputs: str) -> None:
+def _summary(out: Path, turns: int, inputs: str, cell: float | None = None) -> None:
     """Per building each seed's accuracy and, per seed pairing, the loops only one network
     judged right; then per pairing the buildings vgmnet (read with ``inputs``) is ahead on."""
     runs = [json.loads(p.read_text()) for p in sorted(out.glob("*-seed*.json"))]
-    runs = [r for r in runs if r["model"] != "vgmnet" or r.get("inputs", "default") == inputs]
+    runs = [
+        r
+        for r in runs
+        if r["model"] != "vgmnet" or (r.get("inputs", "default"), r.get("cell")) == (inputs, cell)
+    ]
     if not runs:
         raise SystemExit(f"{out}: no fold judgements here yet; run without --summary first")
     print(f"\n# leave-one-building-out by training seed; second look over {turns}")
@@ -313,6 +321,9 @@ def main() -> None:
     parser.add_argument("--epochs", type=int, default=None, help="Epochs per fold model.")
     parser.add_argument("--epoch-size", type=int, default=None, help="Draws per epoch.")
     parser.add_argument("--second-look", type=int, default=4, metavar="TURNS")
+    parser.add_argument(
+        "--cell", type=float, default=None, help="vgmnet's cell in metres (unset: the paper's)."
+    )
     parser.add_argument("--out", default=str(REPO / "build" / "seeds"))
     parser.add_argument(
         "--inputs", choices=sorted(INPUTS), default="default", help="What vgmnet reads."
@@ -326,7 +337,7 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     if not args.summary:
         _train_all(args)
-    _summary(out, args.second_look, args.inputs)
+    _summary(out, args.second_look, args.inputs, args.cell)
 
 
 if __name__ == "__main__":

@@ -206,6 +206,19 @@ def test_recording_reads_back_with_every_entity(runs):
     assert "keyframe" in next(c for c in chunks if c.entity_path == "/world/scan").timeline_names
 
 
+def test_the_final_sweep_can_be_switched_off(office, runs, tmp_path):
+    """``--no-final-sweep`` reaches the front end: the run records it and no loop comes
+    from the sweep."""
+    log, _ = office
+    assert runs["vgmnet"]["settings"]["front_end"]["final_sweep"] is True
+    out = tmp_path / "run.json"
+    cmd.main(["slam", str(log), "--no-final-sweep", "--json", str(out)])
+    doc = json.loads(out.read_text())
+    assert doc["settings"]["front_end"]["final_sweep"] is False
+    assert doc["loops_by_source"]["sweep"] == 0
+    assert doc["loops_by_source"]["window"] > 0  # the online search still ran
+
+
 def test_bad_inputs_end_as_one_line(office, tmp_path, capsys):
     log, _ = office
     bad = tmp_path / "bad.relations"

@@ -153,6 +153,13 @@ def slam(
     loops_per_keyframe: Annotated[
         int, typer.Option(help="Nearest loop candidates matched per keyframe.", min=0)
     ] = 2,
+    final_sweep: Annotated[
+        bool,
+        typer.Option(
+            help="After the last keyframe, search once more, from the final estimate, the "
+            "revisits no kept loop closes."
+        ),
+    ] = True,
     resolution: Annotated[float, positive("Map cell edge, metres (> 0).")] = 0.05,
     inject_false_loops: Annotated[
         int,
@@ -185,6 +192,7 @@ def slam(
             loop_radius=loop_radius,
             loop_min_gap=loop_min_gap,
             loops_per_keyframe=loops_per_keyframe,
+            final_sweep=final_sweep,
             false_loops=inject_false_loops,
             seed=seed,
         ),
