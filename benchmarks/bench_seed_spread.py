@@ -13,7 +13,7 @@ its test judgements under ``--out``, so a stopped run goes on with the next job,
 ``--summary`` prints the tables from whatever is there.
 
 Run: python benchmarks/bench_seed_spread.py [--seeds 1,2] [--jobs 8] [--device cuda]
-     [--out build/seeds] [--summary]
+     [--cell 0.1] [--out build/seeds] [--summary]
 """
 
 from __future__ import annotations
