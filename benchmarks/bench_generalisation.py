@@ -92,6 +92,16 @@ def fold_config(
     )
 
 
+def grid_tag(model: str, cell: float | None) -> str:
+    """What a fold file's name says of its grid: nothing on the paper's cells (or unset),
+    else ``-cell0.1`` and the like, so fold models on both grids are kept side by side."""
+    from vgm_studio.vgm.grid import VGMParams
+
+    if model != "vgmnet" or cell is None or cell == VGMParams().resolution:
+        return ""
+    return f"-cell{cell:g}"
+
+
 def _candidates(log: Path, out: Path, *args: str) -> Path:
     if not out.exists():
         subprocess.run(
@@ -177,16 +187,12 @@ def _fold_rows(
     from vgm_studio.model.checkpoint import load_checkpoint
     from vgm_studio.model.training import train
     from vgm_studio.model.validator import SecondLook, Validator
-    from vgm_studio.vgm.grid import VGMParams
 
     test = subset(data, origin, [fold.test])
     training = subset(data, origin, fold.train)
     rows = []
-    paper = VGMParams().resolution
     for model in models:
-        # A grid other than the paper's is in the name, so fold models on both grids are kept.
-        grid = f"-cell{args.cell:g}" if model == "vgmnet" and args.cell != paper else ""
-        out = BUILD / "folds" / f"{fold.held_out}-{model}{grid}.pt"
+        out = BUILD / "folds" / f"{fold.held_out}-{model}{grid_tag(model, args.cell)}.pt"
         out.parent.mkdir(parents=True, exist_ok=True)  # a fresh clone has no build/ yet
         config = fold_config(
             model, args.epochs, args.epoch_size, args.cell, max_train=args.max_train, device="cpu"

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 from _common import REPO, machine, table
-from bench_generalisation import buildings, fold_config, subset
+from bench_generalisation import buildings, fold_config, grid_tag, subset
 from folds import Fold, make_folds
 from numpy.typing import NDArray
 
@@ -53,9 +53,7 @@ INPUTS: dict[str, HyperFlags] = {
 
 def _stem(building: str, model: str, seed: int, inputs: str, cell: float | None = None) -> str:
     tag = f"{model}-{inputs}" if model == "vgmnet" and inputs != "default" else model
-    if model == "vgmnet" and cell:
-        tag += f"-cell{cell:g}"  # another grid's fold models sit beside the paper grid's
-    return f"{building}-{tag}-seed{seed}"
+    return f"{building}-{tag}{grid_tag(model, cell)}-seed{seed}"
 
 
 @dataclass
@@ -333,6 +331,8 @@ def main() -> None:
     unknown = sorted(set(args.models.split(",")) - set(NETWORKS))
     if unknown:
         raise SystemExit(f"--models: unknown {', '.join(unknown)}; known: {', '.join(NETWORKS)}")
+    if not grid_tag("vgmnet", args.cell):
+        args.cell = None  # the paper's cells, named and recorded as the default's
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if not args.summary:
