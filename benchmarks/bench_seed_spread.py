@@ -51,9 +51,12 @@ INPUTS: dict[str, HyperFlags] = {
 }
 
 
-def _stem(building: str, model: str, seed: int, inputs: str, cell: float | None = None) -> str:
+def _stem(
+    building: str, model: str, seed: int, inputs: str, cell: float | None = None, occlude: float = 0
+) -> str:
     tag = f"{model}-{inputs}" if model == "vgmnet" and inputs != "default" else model
-    return f"{building}-{tag}{grid_tag(model, cell)}-seed{seed}"
+    cuts = f"-occlude{occlude:g}" if model == "vgmnet" and occlude else ""
+    return f"{building}-{tag}{grid_tag(model, cell)}{cuts}-seed{seed}"
 
 
 @dataclass
@@ -100,7 +103,8 @@ def _job(job: tuple[str, str, int]) -> str:
     building, model, seed = job
     loaded = _LOADED[0]
     args = loaded.args
-    result = Path(args.out) / f"{_stem(building, model, seed, args.inputs, args.cell)}.json"
+    stem = _stem(building, model, seed, args.inputs, args.cell, args.occlude)
+    result = Path(args.out) / f"{stem}.json"
     if result.exists():
         return f"{result.stem}: done before"
     torch.set_num_threads(args.threads)
@@ -113,6 +117,7 @@ def _job(job: tuple[str, str, int]) -> str:
         args.epoch_size,
         cell=args.cell,
         inputs=INPUTS[args.inputs],  # rgb-baseline has no switches: the same network
+        occlude=args.occlude if model == "vgmnet" else 0.0,
         seed=seed,
         device=args.device,
         threads=args.threads,
@@ -134,6 +139,7 @@ def _job(job: tuple[str, str, int]) -> str:
             "seed": seed,
             "inputs": args.inputs if model == "vgmnet" else "default",
             "cell": args.cell if model == "vgmnet" else None,
+            "occlude": args.occlude if model == "vgmnet" else 0.0,
             "threshold": checkpoint.threshold,
             "p": [round(float(p), 6) for p in probs],
             "labels": test.labels.tolist(),
@@ -183,14 +189,18 @@ def _train_all(args: argparse.Namespace) -> None:
         pool.join()
 
 
-def _summary(out: Path, turns: int, inputs: str, cell: float | None = None) -> None:
+def _summary(
+    out: Path, turns: int, inputs: str, cell: float | None = None, occlude: float = 0.0
+) -> None:
     """Per building each seed's accuracy and, per seed pairing, the loops only one network
     judged right; then per pairing the buildings vgmnet (read with ``inputs``) is ahead on."""
     runs = [json.loads(p.read_text()) for p in sorted(out.glob("*-seed*.json"))]
     runs = [
         r
         for r in runs
-        if r["model"] != "vgmnet" or (r.get("inputs", "default"), r.get("cell")) == (inputs, cell)
+        if r["model"] != "vgmnet"
+        or (r.get("inputs", "default"), r.get("cell"), r.get("occlude", 0.0))
+        == (inputs, cell, occlude)
     ]
     if not runs:
         raise SystemExit(f"{out}: no fold judgements here yet; run without --summary first")
@@ -322,6 +332,12 @@ def main() -> None:
     parser.add_argument(
         "--cell", type=float, default=None, help="vgmnet's cell in metres (unset: the paper's)."
     )
+    parser.add_argument(
+        "--occlude",
+        type=float,
+        default=0.0,
+        help="Share of vgmnet's training draws cut by a sector (model/occlusion.py).",
+    )
     parser.add_argument("--out", default=str(REPO / "build" / "seeds"))
     parser.add_argument(
         "--inputs", choices=sorted(INPUTS), default="default", help="What vgmnet reads."
@@ -331,13 +347,15 @@ def main() -> None:
     unknown = sorted(set(args.models.split(",")) - set(NETWORKS))
     if unknown:
         raise SystemExit(f"--models: unknown {', '.join(unknown)}; known: {', '.join(NETWORKS)}")
+    if not 0.0 <= args.occlude <= 1.0:
+        raise SystemExit(f"--occlude: a share in [0, 1], not {args.occlude}")
     if not grid_tag("vgmnet", args.cell):
         args.cell = None  # the paper's cells, named and recorded as the default's
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if not args.summary:
         _train_all(args)
-    _summary(out, args.second_look, args.inputs, args.cell)
+    _summary(out, args.second_look, args.inputs, args.cell, args.occlude)
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ from tqdm import tqdm
 from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.model.features import PairSample
 from vgm_studio.model.metrics import binary_metrics
+from vgm_studio.model.occlusion import cut_sectors
 from vgm_studio.model.precise_bn import precise_batch_norm
 from vgm_studio.model.resume import RunState, load_run, run_key, save_run
 from vgm_studio.model.validator import InputSpec, batched_logits, network_logits
@@ -43,7 +44,9 @@ class Recipe:
         weight_decay: Adam weight decay.
         patience: Stop after this many epochs without a better validation loss.
         augment: Turn each training pair by a random rigid rotation.
-        seed: Seeds the draws and the rotations.
+        occlude: Share of training draws that lose one scan's points in a random sector
+            (``model/occlusion.py``); 0 cuts none.
+        seed: Seeds the draws, the rotations and the cuts.
         bn_batches: Before each validation, batch norm's statistics are recomputed over this
             many batches of training draws (``precise_bn``); 0 keeps the running averages.
     """
@@ -55,6 +58,7 @@ class Recipe:
     weight_decay: float = 1e-4
     patience: int = 8
     augment: bool = True
+    occlude: float = 0.0
     seed: int = 0
     bn_batches: int = 0
 
@@ -284,8 +288,7 @@ class _Run:
             leave=False,
         )
         total = 0.0
-        for step, (idx, rot) in enumerate(bar):
-            batch = [rows.samples[i] for i in idx]
+        for step, (idx, rot, batch) in enumerate(bar):
             total += train_step(
                 self.net,
                 self.spec,
@@ -309,14 +312,20 @@ class _Run:
 
     def _batches(
         self, count: int, rng: np.random.Generator
-    ) -> Iterator[tuple[NDArray[np.int64], NDArray[np.float64] | None]]:
+    ) -> Iterator[tuple[NDArray[np.int64], NDArray[np.float64] | None, list[PairSample]]]:
         """``count`` class-balanced training draws a batch at a time, each with its pairs'
-        rotations (None without augmentation), drawn from ``rng`` as the batches are taken."""
-        rows, size = self.rows, self.recipe.batch_size
+        rotations (None without augmentation) and its pairs, sector-cut where the recipe
+        says; drawn from ``rng`` as the batches are taken."""
+        rows, recipe = self.rows, self.recipe
         draws = rows.train[balanced_draws(rows.labels[rows.train], count, rng)]
-        for start in range(0, count, size):
-            idx = draws[start : start + size]
-            yield idx, rng.uniform(0, 2 * np.pi, len(idx)) if self.recipe.augment else None
+        for start in range(0, count, recipe.batch_size):
+            idx = draws[start : start + recipe.batch_size]
+            rot = rng.uniform(0, 2 * np.pi, len(idx)) if recipe.augment else None
+            batch = [rows.samples[i] for i in idx]
+            # Drawn only when asked, so a recipe without cuts draws as it always has.
+            if recipe.occlude:
+                batch = cut_sectors(batch, recipe.occlude, rng)
+            yield idx, rot, batch
 
     def _precise_batch_norm(self, epoch: int) -> None:
         """Batch norm's statistics recomputed over ``bn_batches`` batches of training
@@ -324,8 +333,8 @@ class _Run:
         run, stay as they were."""
         rng = np.random.default_rng([self.recipe.seed, epoch, 7])
         drawn = list(self._batches(self.recipe.bn_batches * self.recipe.batch_size, rng))
-        batches = [[self.rows.samples[i] for i in idx] for idx, _ in drawn]
-        precise_batch_norm(self.net, self.spec, batches, [rot for _, rot in drawn], self.device)
+        batches = [batch for _, _, batch in drawn]
+        precise_batch_norm(self.net, self.spec, batches, [rot for _, rot, _ in drawn], self.device)
 
 
 def _validation(

@@ -57,6 +57,7 @@ class TrainConfig:
         max_train: Train on at most this many edges, drawn per (log, label) (slow models on
             a CPU); None uses all.
         augment: Turn each training pair by a random rigid rotation.
+        occlude: Share of training draws that lose one scan's points in a random sector.
         seed: Seeds the split, the draws, the augmentation and the weights.
         bn_batches: Batches of training draws batch norm's statistics are recomputed over
             before each validation (``model/precise_bn.py``); 0 keeps the running averages.
@@ -79,6 +80,7 @@ class TrainConfig:
     epoch_size: int | None = Recipe.epoch_size
     max_train: int | None = None
     augment: bool = Recipe.augment
+    occlude: float = Recipe.occlude
     seed: int = Recipe.seed
     bn_batches: int = Recipe.bn_batches
     device: str = "auto"
