@@ -9,6 +9,7 @@ Intel loops. Run: python benchmarks/operating_point.py [CHECKPOINT]
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -23,13 +24,21 @@ PRECISIONS = (0.95, 0.98, 0.99, 0.995)
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument(
+        "checkpoint", nargs="?", type=Path, default=DEFAULT, help="Model (default: bundled)."
+    )
+    path = parser.parse_args().checkpoint
     pin_to_cores(2)
+    from vgm_studio.errors import InputError
     from vgm_studio.model.metrics import binary_metrics
     from vgm_studio.model.training import read_labelled
     from vgm_studio.model.validator import Validator
 
-    path = Path(sys.argv[1]) if len(sys.argv) > 1 else DEFAULT
-    validator = Validator.load(path, device="cpu")
+    try:
+        validator = Validator.load(path, device="cpu")
+    except InputError as exc:
+        raise SystemExit(str(exc)) from None
     curve = validator.checkpoint.curve
     if curve is None:
         raise SystemExit(f"{path}: the checkpoint keeps no validation curve")

@@ -371,7 +371,7 @@ def test_train_command_defaults_are_the_train_config_defaults():
     defaults = TrainConfig()
     params = inspect.signature(train_command).parameters
     shared = ["epochs", "batch_size", "lr", "patience", "val_fraction", "epoch_size"]
-    shared += ["max_train", "augment", "seed", "bn_batches", "threads"]
+    shared += ["max_train", "augment", "occlude", "seed", "bn_batches", "threads"]
     for name in shared:
         assert params[name].default == getattr(defaults, name), name
     assert params["cell_size"].default == defaults.vgm.resolution

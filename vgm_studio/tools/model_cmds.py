@@ -31,6 +31,15 @@ def train(
         int | None, typer.Option(min=2, help="Train on at most this many edges.")
     ] = None,
     augment: Annotated[bool, typer.Option(help="Random rigid rotations of pairs.")] = True,
+    occlude: Annotated[
+        float,
+        typer.Option(
+            min=0.0,
+            max=1.0,
+            help="Share of training draws that lose one scan's points in a random sector "
+            "(60-180°), so pairs that share little are seen in training.",
+        ),
+    ] = 0.0,
     # The defaults are HyperFlags's: the bundled model's inputs (``default_hyper``).
     figures: Annotated[
         bool, typer.Option(help="vgmnet: also read the matcher's figures (--inliers, --spread).")
@@ -112,6 +121,7 @@ def train(
         epoch_size=epoch_size,
         max_train=max_train,
         augment=augment,
+        occlude=occlude,
         seed=seed,
         bn_batches=bn_batches,
         device=device.value,
