@@ -52,7 +52,12 @@ INPUTS: dict[str, HyperFlags] = {
 
 
 def _stem(
-    building: str, model: str, seed: int, inputs: str, cell: float | None = None, occlude: float = 0
+    building: str,
+    model: str,
+    seed: int,
+    inputs: str,
+    cell: float | None = None,
+    occlude: float = 0.0,
 ) -> str:
     tag = f"{model}-{inputs}" if model == "vgmnet" and inputs != "default" else model
     cuts = f"-occlude{occlude:g}" if model == "vgmnet" and occlude else ""
@@ -103,7 +108,8 @@ def _job(job: tuple[str, str, int]) -> str:
     building, model, seed = job
     loaded = _LOADED[0]
     args = loaded.args
-    stem = _stem(building, model, seed, args.inputs, args.cell, args.occlude)
+    occlude = args.occlude if model == "vgmnet" else 0.0  # rgb-baseline is never cut
+    stem = _stem(building, model, seed, args.inputs, args.cell, occlude)
     result = Path(args.out) / f"{stem}.json"
     if result.exists():
         return f"{result.stem}: done before"
@@ -117,7 +123,7 @@ def _job(job: tuple[str, str, int]) -> str:
         args.epoch_size,
         cell=args.cell,
         inputs=INPUTS[args.inputs],  # rgb-baseline has no switches: the same network
-        occlude=args.occlude if model == "vgmnet" else 0.0,
+        occlude=occlude,
         seed=seed,
         device=args.device,
         threads=args.threads,
@@ -139,7 +145,7 @@ def _job(job: tuple[str, str, int]) -> str:
             "seed": seed,
             "inputs": args.inputs if model == "vgmnet" else "default",
             "cell": args.cell if model == "vgmnet" else None,
-            "occlude": args.occlude if model == "vgmnet" else 0.0,
+            "occlude": occlude,
             "threshold": checkpoint.threshold,
             "p": [round(float(p), 6) for p in probs],
             "labels": test.labels.tolist(),
