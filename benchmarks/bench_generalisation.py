@@ -146,6 +146,7 @@ def subset(data, origin: list[str], files: list[Path]):
         [data.samples[i] for i in keep],
         data.labels[keep],
         [f for f in data.files if f["path"] in wanted],
+        data.context,
     )
 
 

@@ -58,10 +58,12 @@ def _stem(
     inputs: str,
     cell: float | None = None,
     occlude: float = 0.0,
+    context: int = 0,
 ) -> str:
     tag = f"{model}-{inputs}" if model == "vgmnet" and inputs != "default" else model
     cuts = f"-occlude{occlude:g}" if model == "vgmnet" and occlude else ""
-    return f"{building}-{tag}{grid_tag(model, cell)}{cuts}-seed{seed}"
+    near = f"-context{context}" if model == "vgmnet" and context else ""
+    return f"{building}-{tag}{grid_tag(model, cell)}{cuts}{near}-seed{seed}"
 
 
 @dataclass
@@ -79,11 +81,12 @@ _LOADED: list[_Loaded] = []  # this process's, set by _load
 
 def _load(args: argparse.Namespace) -> list[str]:
     """Reads every fold's edges into this process; the held-out buildings, in fold order."""
+    from vgm_studio.model.context import Context
     from vgm_studio.model.training import read_labelled
 
     folds = _folds(args)
     files = sorted({p for f in folds for p in f.train} | {f.test for f in folds})
-    data = read_labelled(files, progress=False)
+    data = read_labelled(files, progress=False, context=Context(neighbours=args.context))
     origin = [f["path"] for f in data.files for _ in range(f["used"])]
     _LOADED[:] = [_Loaded(args, {f.held_out: f for f in folds}, data, origin)]
     return [f.held_out for f in folds]
@@ -109,7 +112,7 @@ def _job(job: tuple[str, str, int]) -> str:
     loaded = _LOADED[0]
     args = loaded.args
     occlude = args.occlude if model == "vgmnet" else 0.0  # rgb-baseline is never cut
-    stem = _stem(building, model, seed, args.inputs, args.cell, occlude)
+    stem = _stem(building, model, seed, args.inputs, args.cell, occlude, args.context)
     result = Path(args.out) / f"{stem}.json"
     if result.exists():
         return f"{result.stem}: done before"
@@ -124,6 +127,7 @@ def _job(job: tuple[str, str, int]) -> str:
         cell=args.cell,
         inputs=INPUTS[args.inputs],  # rgb-baseline has no switches: the same network
         occlude=occlude,
+        context=training.context,
         seed=seed,
         device=args.device,
         threads=args.threads,
@@ -146,6 +150,7 @@ def _job(job: tuple[str, str, int]) -> str:
             "inputs": args.inputs if model == "vgmnet" else "default",
             "cell": args.cell if model == "vgmnet" else None,
             "occlude": occlude,
+            "context": args.context,
             "threshold": checkpoint.threshold,
             "p": [round(float(p), 6) for p in probs],
             "labels": test.labels.tolist(),
@@ -196,7 +201,12 @@ def _train_all(args: argparse.Namespace) -> None:
 
 
 def _summary(
-    out: Path, turns: int, inputs: str, cell: float | None = None, occlude: float = 0.0
+    out: Path,
+    turns: int,
+    inputs: str,
+    cell: float | None = None,
+    occlude: float = 0.0,
+    context: int = 0,
 ) -> None:
     """Per building each seed's accuracy and, per seed pairing, the loops only one network
     judged right; then per pairing the buildings vgmnet (read with ``inputs``) is ahead on."""
@@ -205,8 +215,8 @@ def _summary(
         r
         for r in runs
         if r["model"] != "vgmnet"
-        or (r.get("inputs", "default"), r.get("cell"), r.get("occlude", 0.0))
-        == (inputs, cell, occlude)
+        or (r.get("inputs", "default"), r.get("cell"), r.get("occlude", 0.0), r.get("context", 0))
+        == (inputs, cell, occlude, context)
     ]
     if not runs:
         raise SystemExit(f"{out}: no fold judgements here yet; run without --summary first")
@@ -344,6 +354,13 @@ def main() -> None:
         default=0.0,
         help="Share of vgmnet's training draws cut by a sector (model/occlusion.py).",
     )
+    parser.add_argument(
+        "--context",
+        type=int,
+        default=0,
+        help="Neighbour scans each side of a pair's scans adds on each side (model/context.py); "
+        "vgmnet only: run with --models vgmnet.",
+    )
     parser.add_argument("--out", default=str(REPO / "build" / "seeds"))
     parser.add_argument(
         "--inputs", choices=sorted(INPUTS), default="default", help="What vgmnet reads."
@@ -353,6 +370,10 @@ def main() -> None:
     unknown = sorted(set(args.models.split(",")) - set(NETWORKS))
     if unknown:
         raise SystemExit(f"--models: unknown {', '.join(unknown)}; known: {', '.join(NETWORKS)}")
+    if args.context < 0:
+        raise SystemExit(f"--context: neighbour scans, 0 or more, not {args.context}")
+    if args.context and "rgb-baseline" in args.models.split(",") and not args.summary:
+        raise SystemExit("--context: vgmnet only; run it with --models vgmnet")
     if not 0.0 <= args.occlude <= 1.0:
         raise SystemExit(f"--occlude: a share in [0, 1], not {args.occlude}")
     if not grid_tag("vgmnet", args.cell):
@@ -361,7 +382,7 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     if not args.summary:
         _train_all(args)
-    _summary(out, args.second_look, args.inputs, args.cell, args.occlude)
+    _summary(out, args.second_look, args.inputs, args.cell, args.occlude, args.context)
 
 
 if __name__ == "__main__":

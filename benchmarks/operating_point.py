@@ -42,7 +42,7 @@ def main() -> None:
     curve = validator.checkpoint.curve
     if curve is None:
         raise SystemExit(f"{path}: the checkpoint keeps no validation curve")
-    test = read_labelled([test_edges()], progress=False)
+    test = read_labelled([test_edges()], progress=False, context=validator.context)
     probs = validator.predict_samples(test.samples)
     cuts = [(f"{p}", validator.threshold_at_precision(p)) for p in PRECISIONS]
     rows = []

@@ -76,8 +76,8 @@ def main() -> None:
     pin_to_cores(2)
     from vgm_studio.core.hashing import content_hash
     from vgm_studio.errors import InputError
+    from vgm_studio.matching.edge_scans import EdgeScans
     from vgm_studio.matching.edges import read_edges
-    from vgm_studio.model.features import load_samples
     from vgm_studio.model.validator import Validator
     from vgm_studio.slam.config import ValidationConfig
 
@@ -90,13 +90,14 @@ def main() -> None:
     except InputError as exc:
         raise SystemExit(str(exc)) from None
     rows = []
+    scans = EdgeScans()  # each log read once, whatever each model draws from it
     for name in ROWS:
         edges = read_edges(loops_file(name, out))
-        samples = load_samples(edges, progress=False)
         labels = np.array([e.label or "" for e in edges], dtype=object)
         right, wrong = int((labels == "success").sum()), int((labels == "failure").sum())
         counts = f"{right} / {wrong}" if right + wrong else f"{len(edges)} (no reference)"
-        judged = [_judged(v.predict_samples(samples), labels, bar) for v in validators]
+        # Each model reads the loops as it was trained to (its own context, model/context.py).
+        judged = [_judged(v.predict(edges, scans), labels, bar) for v in validators]
         rows.append([name, counts, *judged])
     print(f"# loops the bundled model's SLAM runs matched ({out.name}), judged at p ≥ {bar}")
     print(f"# {machine()}")

@@ -182,27 +182,35 @@ def test_a_checkpoint_saved_before_a_hyper_parameter_existed_still_starts_a_run(
     """The bundled model's hyper-parameters predate ``inliers``; a warm start from it must
     still match the network today's defaults build, and not one built otherwise."""
     from vgm_studio.model.checkpoint import Checkpoint
+    from vgm_studio.model.context import Context
     from vgm_studio.model.registry import build_network
 
     net, full = build_network("vgmnet", {"figures": True, "spread": True})
     saved = {k: v for k, v in full.items() if k != "inliers"}
     old = Checkpoint(model="vgmnet", hyper=saved, state_dict=net.state_dict())
-    assert old.starts("vgmnet", full, VGMParams()) is not None
+    single = Context()
+    assert old.starts("vgmnet", full, VGMParams(), single) is not None
     _, variances_alone = build_network("vgmnet", {**full, "inliers": False})
-    assert old.starts("vgmnet", variances_alone, VGMParams()) is None
-    assert old.starts("vgmnet", full, VGMParams(resolution=0.1)) is None
+    assert old.starts("vgmnet", variances_alone, VGMParams(), single) is None
+    assert old.starts("vgmnet", full, VGMParams(resolution=0.1), single) is None
+    # Weights fitted to single scans are no start for a network that reads local maps.
+    assert old.starts("vgmnet", full, VGMParams(), Context(neighbours=2)) is None
 
 
 def test_the_bundled_model_is_what_the_default_inputs_build():
     """The background trainer starts from the bundled model with ``default_hyper``'s inputs:
     a default changed without the bundled model trained again would leave every run cold."""
     from vgm_studio.model.checkpoint import load_checkpoint
+    from vgm_studio.model.context import Context
     from vgm_studio.model.registry import BUNDLED_MODEL
     from vgm_studio.trainer.fit import FitConfig
 
     config = FitConfig()
     _, hyper = build_network("vgmnet", config.hyper)
-    assert load_checkpoint(BUNDLED_MODEL).starts("vgmnet", hyper, config.vgm) is not None
+    bundled = load_checkpoint(BUNDLED_MODEL)
+    # The background trainer reads single scans, as the bundled model does.
+    assert bundled.context == Context()
+    assert bundled.starts("vgmnet", hyper, config.vgm, Context()) is not None
 
 
 def test_precise_batch_norm_recomputes_the_statistics_and_leaves_the_learning_alone(rows):

@@ -137,6 +137,10 @@ def test_a_host_that_is_not_this_machine_says_so(tmp_path):
         ({"vgm": {"size": 400}}, "vgm.resolution: missing"),
         ({"threshold": float("nan")}, "threshold: must be a finite number"),
         ({"model": "evil"}, "model: unknown model (expected one of vgmnet,"),
+        (
+            {"context": {"neighbours": -1, "spacing": 0.5, "turn": 0.35, "reach": 2.0, "scans": 9}},
+            "context.neighbours: Input should be greater than or equal to 0",
+        ),
     ],
 )
 def test_a_checkpoint_with_bad_metadata_is_one_line(office_edges, tmp_path, change, expected):

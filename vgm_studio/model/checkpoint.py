@@ -19,6 +19,7 @@ from vgm_studio.atomic import atomic_path
 from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.errors import InputError
 from vgm_studio.model.checkpoint_schema import parse_checkpoint_meta
+from vgm_studio.model.context import Context
 from vgm_studio.model.operating import PrecisionCurve, threshold_for_precision
 from vgm_studio.model.registry import build_network
 from vgm_studio.vgm.grid import VGMParams
@@ -37,6 +38,8 @@ class Checkpoint:
     Attributes:
         model: The registry's name of the model.
         vgm: The VGM parameters it was trained on.
+        context: The neighbours each side of a pair was drawn with (``model/context.py``);
+            a checkpoint without one read single scans.
         hyper: Its hyper-parameters (defaults included for networks).
         threshold: p(success) at or above which it says success.
         metrics: Validation figures (``binary_metrics``), {} without validation edges.
@@ -52,6 +55,7 @@ class Checkpoint:
 
     model: str
     vgm: VGMParams = field(default_factory=VGMParams)
+    context: Context = field(default_factory=Context)
     hyper: dict[str, Any] = field(default_factory=dict)
     threshold: float = DEFAULT_THRESHOLD
     metrics: dict[str, Any] = field(default_factory=dict)
@@ -64,11 +68,12 @@ class Checkpoint:
     curve: PrecisionCurve | None = None
 
     def starts(
-        self, model: str, hyper: dict[str, Any], vgm: VGMParams
+        self, model: str, hyper: dict[str, Any], vgm: VGMParams, context: Context
     ) -> dict[str, torch.Tensor] | None:
         """Its weights, when they fit a ``model`` network built with ``hyper`` that reads
-        ``vgm`` VGMs (a warm start); None when it is another model or other settings."""
-        if self.model != model or self.vgm != vgm:
+        ``vgm`` VGMs drawn with ``context`` (a warm start); None when it is another model or
+        other settings."""
+        if self.model != model or self.vgm != vgm or self.context != context:
             return None
         # Completed with today's defaults: a field added since it was saved (``inliers``) is
         # absent from its hyper-parameters, and was then what its default is now.
@@ -77,7 +82,12 @@ class Checkpoint:
 
     def to_dict(self) -> dict[str, Any]:
         """The on-disk layout."""
-        out: dict[str, Any] = {"format": FORMAT, **self.__dict__, "vgm": asdict(self.vgm)}
+        out: dict[str, Any] = {
+            "format": FORMAT,
+            **self.__dict__,
+            "vgm": asdict(self.vgm),
+            "context": asdict(self.context),
+        }
         out["curve"] = self.curve.to_dict() if self.curve is not None else None
         return {k: v for k, v in out.items() if v is not None}
 
@@ -88,6 +98,7 @@ class Checkpoint:
         return cls(
             model=content["model"],
             vgm=VGMParams(**content["vgm"]),
+            context=Context(**(content.get("context") or {})),
             hyper=dict(content.get("hyper") or {}),
             threshold=DEFAULT_THRESHOLD if threshold is None else float(threshold),
             metrics=dict(content.get("metrics") or {}),

@@ -33,6 +33,18 @@ class VGMMeta(BaseModel):
     sigma: Annotated[Finite, Field(gt=0.0, le=10.0)]
 
 
+class ContextMeta(BaseModel):
+    """``Context`` as stored: the neighbours each side of a pair was drawn with."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    neighbours: Annotated[int, Field(ge=0, le=64)]
+    spacing: Annotated[Finite, Field(ge=0.0, le=100.0)]
+    turn: Annotated[Finite, Field(ge=0.0, le=7.0)]
+    reach: Annotated[Finite, Field(ge=0.0, le=1000.0)]
+    scans: Annotated[int, Field(ge=1, le=1_000_000)]
+
+
 class CheckpointMeta(BaseModel):
     """What every checkpoint carries besides its weights; other keys are kept as they are."""
 
@@ -41,6 +53,7 @@ class CheckpointMeta(BaseModel):
     format: str
     model: Annotated[str, Field(max_length=64), AfterValidator(_known_model)]
     vgm: VGMMeta
+    context: ContextMeta | None = None
     threshold: Annotated[Finite, Field(ge=0.0, le=1.0)] | None = None
     hyper: dict[str, Any] | None = None
     metrics: dict[str, Any] | None = None

@@ -18,6 +18,7 @@ from tqdm import tqdm
 from vgm_studio.core import se2
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
+from vgm_studio.model.context import Context, Poses, local_points, log_poses
 from vgm_studio.vgm.grid import VGMParams, batch_cells
 
 
@@ -70,14 +71,28 @@ def _spread(covariance: object) -> tuple[float, float]:
 
 
 def load_samples(
-    edges: Sequence[Edge], scans: EdgeScans | None = None, progress: bool = True
+    edges: Sequence[Edge],
+    scans: EdgeScans | None = None,
+    progress: bool = True,
+    context: Context | None = None,
 ) -> list[PairSample]:
-    """Reads every edge's two scans (each log once) and returns one sample per edge."""
+    """Reads every edge's two scans (each log once) and returns one sample per edge; with a
+    ``context`` each side is its scan's local map (``model/context.py``)."""
     scans = scans or EdgeScans()
+    poses: dict[int, Poses] = {}  # each log's, worked out once
     out = []
     for edge in tqdm(edges, desc="reading scans", unit="edge", disable=None if progress else True):
         a, b = scans.scans(edge)
-        out.append(sample_from_scans(a.points(), b.points(), edge.estimate, edge.match))
+        if context is None or context.neighbours <= 0:
+            prev, cur = a.points(), b.points()
+        else:
+            log = scans.log_for(edge).scans
+            if id(log) not in poses:
+                poses[id(log)] = log_poses(log)
+            placed = poses[id(log)]
+            prev = local_points(log, placed, edge.a, edge.b, context)
+            cur = local_points(log, placed, edge.b, edge.a, context)
+        out.append(sample_from_scans(prev, cur, edge.estimate, edge.match))
     return out
 
 

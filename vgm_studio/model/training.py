@@ -24,6 +24,7 @@ from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge, read_edges
 from vgm_studio.model.calibration import calibrate, calibration_mask
 from vgm_studio.model.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from vgm_studio.model.context import Context
 from vgm_studio.model.features import PairSample, figures_matrix, load_samples
 from vgm_studio.model.fitting import Recipe, Rows, choose_threshold, fit_network
 from vgm_studio.model.registry import build_network, entry
@@ -66,6 +67,8 @@ class TrainConfig:
         init: A checkpoint of the same model and hyper-parameters whose weights the run
             starts from (a second schedule on a slow network); None starts fresh.
         vgm: VGM parameters.
+        context: The neighbours each side of a pair is drawn with (``model/context.py``);
+            the edges must be read with the same (``read_labelled``).
         hyper: Network hyper-parameters overriding the model's defaults.
     """
 
@@ -87,6 +90,7 @@ class TrainConfig:
     threads: int | None = None
     init: str | None = None
     vgm: VGMParams = field(default_factory=VGMParams)
+    context: Context = field(default_factory=Context)
     hyper: dict[str, Any] = field(default_factory=dict)
 
     def recipe(self) -> Recipe:
@@ -102,6 +106,7 @@ class LabelledSet:
     samples: list[PairSample]
     labels: NDArray[np.bool_]
     files: list[dict[str, Any]]
+    context: Context = field(default_factory=Context)  # what each side was drawn with
 
     @property
     def groups(self) -> list[str]:
@@ -109,9 +114,13 @@ class LabelledSet:
 
 
 def read_labelled(
-    paths: Sequence[Path], scans: EdgeScans | None = None, progress: bool = True
+    paths: Sequence[Path],
+    scans: EdgeScans | None = None,
+    progress: bool = True,
+    context: Context | None = None,
 ) -> LabelledSet:
-    """Reads edge files, keeps ``success`` and ``failure`` edges, loads their scans."""
+    """Reads edge files, keeps ``success`` and ``failure`` edges, loads their scans (each
+    side its scan's local map with a ``context``, ``model/context.py``)."""
     edges: list[Edge] = []
     files = []
     for path in paths:
@@ -133,10 +142,13 @@ def read_labelled(
             paths[0] if paths else None, "no edge labelled success or failure in the given files"
         )
     samples = load_samples(
-        edges, scans or EdgeScans(tuple(Path(p).parent for p in paths)), progress=progress
+        edges,
+        scans or EdgeScans(tuple(Path(p).parent for p in paths)),
+        progress=progress,
+        context=context,
     )
     labels = np.array([e.label == "success" for e in edges], dtype=bool)
-    return LabelledSet(edges, samples, labels, files)
+    return LabelledSet(edges, samples, labels, files, context or Context())
 
 
 def stratified_split(
@@ -202,6 +214,10 @@ def train(
     Returns:
         The checkpoint written.
     """
+    if data.context != config.context:
+        raise ValueError(
+            f"the edges were read with {data.context}, but the config asks for {config.context}"
+        )
     model = entry(config.model)
     start = time.perf_counter()
     torch.manual_seed(config.seed)
@@ -226,7 +242,7 @@ def train(
         "files": data.files,
         "counts": counts,
         "seconds": time.perf_counter() - start,
-        "config": {k: v for k, v in asdict(config).items() if k != "vgm"},
+        "config": {k: v for k, v in asdict(config).items() if k not in ("vgm", "context")},
         "calibration_edges": int(real.sum()),
     }
     save_checkpoint(out, checkpoint)
@@ -244,6 +260,7 @@ def _fit_score(rows: Rows, config: TrainConfig) -> tuple[Checkpoint, NDArray[np.
     checkpoint = Checkpoint(
         model=config.model,
         vgm=config.vgm,
+        context=config.context,
         hyper={"spread": spread} if spread else {},
         score=asdict(score),
     )
@@ -258,7 +275,7 @@ def _fit_network(
     device = pick_device(config.device)
     net, hyper = build_network(config.model, config.hyper)
     if config.init is not None:
-        weights = _initial_weights(Path(config.init), config.model, hyper, config.vgm)
+        weights = _initial_weights(Path(config.init), config.model, hyper, config)
         net.load_state_dict(weights)
     net = net.to(device).to(memory_format=torch.channels_last)  # type: ignore[call-overload]
     spec = input_spec(config.model, hyper, config.vgm)
@@ -268,6 +285,7 @@ def _fit_network(
     checkpoint = Checkpoint(
         model=config.model,
         vgm=config.vgm,
+        context=config.context,
         hyper=hyper,
         state_dict=fitted.state_dict,
         history=fitted.history,
@@ -277,12 +295,12 @@ def _fit_network(
 
 
 def _initial_weights(
-    path: Path, model: str, hyper: dict[str, Any], vgm: VGMParams
+    path: Path, model: str, hyper: dict[str, Any], config: TrainConfig
 ) -> dict[str, torch.Tensor]:
     """The weights of the checkpoint at ``path``, refused unless it is ``model`` with
-    ``hyper`` on ``vgm`` VGMs."""
+    ``hyper`` on the config's VGMs and context."""
     start = load_checkpoint(path)
-    weights = start.starts(model, hyper, vgm)
+    weights = start.starts(model, hyper, config.vgm, config.context)
     if weights is None:
         raise InputError(
             path, f"is a {start.model} checkpoint with other settings; --init needs a {model} one"

@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 from scipy.special import logit
 from torch import nn
 
+from vgm_studio.errors import InputError
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
 from vgm_studio.model.checkpoint import Checkpoint, load_checkpoint, precision_threshold
@@ -271,6 +272,7 @@ class Validator:
         self.path = path
         self.name = checkpoint.model
         self.vgm = checkpoint.vgm
+        self.context = checkpoint.context
         self.hyper = checkpoint.hyper
         self.threshold = checkpoint.threshold
         self.device = pick_device(device)
@@ -308,6 +310,20 @@ class Validator:
         """The validation metrics recorded at training time."""
         return dict(self.checkpoint.metrics)
 
+    def require_single_scans(self, user: str) -> None:
+        """Refuses a validator that reads local maps where ``user`` gives it single scans.
+
+        Raises:
+            InputError: It was trained with ``--context``.
+        """
+        if self.context.neighbours > 0:
+            raise InputError(
+                self.path,
+                f"reads each scan with {self.context.neighbours} neighbours a side "
+                f"(trained with --context); {user} gives single scans: use a model trained "
+                "without --context",
+            )
+
     def threshold_at_precision(self, precision: float) -> float:
         """The lowest p(success) cut whose validation precision reaches ``precision``.
 
@@ -323,7 +339,8 @@ class Validator:
         second_look: SecondLook | None = None,
     ) -> NDArray[np.float64]:
         """p(success) for each sample, computed in batches; ``second_look`` (else the one
-        this validator was loaded with) looks again at the pairs the network is unsure of."""
+        this validator was loaded with) looks again at the pairs the network is unsure of.
+        Each side must be drawn with the validator's ``context`` (``predict`` does that)."""
         if self.score is not None:
             return self.score.predict(figures_matrix(samples, len(self.score.mean) == 4))
         assert self.inference is not None
@@ -348,6 +365,7 @@ class Validator:
         batch_size: int = 256,
         progress: bool = False,
     ) -> NDArray[np.float64]:
-        """p(success) for each edge; the edges' logs are read once through ``scans``."""
-        samples = load_samples(edges, scans, progress=progress)
+        """p(success) for each edge; the edges' logs are read once through ``scans``, each
+        side drawn with the validator's ``context``."""
+        samples = load_samples(edges, scans, progress=progress, context=self.context)
         return self.predict_samples(samples, batch_size)

@@ -28,7 +28,7 @@ def train_model(edges: list[Path], out: Path, config: TrainConfig, warn: Say = q
     Raises:
         InputError: No labelled edges, or training cannot start.
     """
-    data = read_labelled(edges)
+    data = read_labelled(edges, context=config.context)
     try:
         checkpoint = train(data, config, out, log=warn)
     except ValueError as exc:
@@ -55,7 +55,7 @@ def evaluate_model(
 ) -> str:
     """A model's figures on labelled edges, as the paper's table; also as JSON when asked."""
     validator = Validator.load(model, device=device)
-    data = read_labelled(edges)
+    data = read_labelled(edges, context=validator.context)
     start = time.perf_counter()
     probs = validator.predict_samples(data.samples, batch_size)
     seconds = time.perf_counter() - start

@@ -158,4 +158,5 @@ def _load(path: Path | None, validator: str) -> Validator:
     model = shared_validator(path)
     if model.name not in VALIDATOR_MODELS[validator]:
         raise InputError(path, f"is a {model.name} checkpoint, not one for --validator {validator}")
+    model.require_single_scans("slam")
     return model

@@ -78,6 +78,16 @@ def train(
             "(0.05: the paper's 20 m; 0.1: 40 m, which keeps a campus scan's far points).",
         ),
     ] = 0.05,
+    context: Annotated[
+        int,
+        typer.Option(
+            min=0,
+            max=16,
+            help="Draw each side of a pair from its scan and up to this many neighbour scans "
+            "a side in the log (0: the scan alone). eval and predict read edges the same way; "
+            "slam and the background trainer take single-scan models only.",
+        ),
+    ] = 0,
     seed: Annotated[int, typer.Option(help="Seed for split, draws and weights.")] = 0,
     bn_batches: Annotated[
         int,
@@ -93,6 +103,7 @@ def train(
     ] = None,
 ) -> None:
     """Train a validator on labelled edges (ambiguous and unlabelled ones are left out)."""
+    from vgm_studio.model.context import Context
     from vgm_studio.model.training import TrainConfig
     from vgm_studio.services.models import train_model
     from vgm_studio.vgm.grid import VGMParams
@@ -129,6 +140,7 @@ def train(
         init=None if init is None else str(init),
         hyper=entry(model).hyper(HyperFlags(figures, occupancy, spread, inliers, blind)),
         vgm=VGMParams(resolution=cell_size),
+        context=Context(neighbours=context),
     )
     typer.echo(train_model(edges, out, config, warn=lambda line: typer.echo(line, err=True)))
 

@@ -153,6 +153,7 @@ class BaseSet:
     labels: NDArray[np.bool_]
     guard_samples: list[PairSample] = field(default_factory=list)
     guard_labels: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    guard_edges: list[Edge] = field(default_factory=list)  # for a model that reads local maps
 
     @classmethod
     def read(cls, paths: Sequence[Path], guard_fraction: float = 0.0, seed: int = 0) -> BaseSet:
@@ -166,6 +167,7 @@ class BaseSet:
             data.labels[train],
             [data.samples[i] for i in guard],
             data.labels[guard],
+            [data.edges[i] for i in guard],
         )
 
 

@@ -21,6 +21,7 @@ import torch
 from numpy.typing import NDArray
 
 from vgm_studio.model.checkpoint import Checkpoint
+from vgm_studio.model.context import Context
 from vgm_studio.model.features import PairSample
 from vgm_studio.model.fitting import EpochHook, Recipe, Rows, fit_network
 from vgm_studio.model.operating import PrecisionCurve, precision_curve
@@ -108,7 +109,8 @@ def fit(
     torch.manual_seed(config.seed)
     # Built on the CPU and trained there: beside the app, the GPU, if any, is not ours to take.
     net, hyper = build_network(MODEL, config.hyper)
-    weights = init.starts(MODEL, hyper, config.vgm) if init is not None else None
+    # The background trainer reads single scans (its samples carry no neighbours).
+    weights = init.starts(MODEL, hyper, config.vgm, Context()) if init is not None else None
     warm = weights is not None
     if weights is not None:
         net.load_state_dict(weights)

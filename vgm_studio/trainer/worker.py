@@ -279,7 +279,12 @@ class Worker:
         scored = None
         if path is not None and path.is_file():
             validator = Validator.load(path, device="cpu")
-            p = validator.predict_samples(self.base.guard_samples, 128)
+            # A model in use that reads local maps is judged on the guard edges drawn so.
+            p = (
+                validator.predict(self.base.guard_edges, batch_size=128)
+                if validator.context.neighbours
+                else validator.predict_samples(self.base.guard_samples, 128)
+            )
             scored = Scored(self.base.guard_labels, p, validator.threshold)
         self._guard_cache = (model or "", scored)
         return scored

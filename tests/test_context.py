@@ -1,0 +1,201 @@
+"""Submap VGMs: which neighbours join a scan, and where their points land."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from vgm_studio.core import se2
+from vgm_studio.datasets import Scan
+from vgm_studio.model.context import Context, local_points, log_poses, neighbours
+
+_BEAMS = 8  # a ring of beams 45° apart, each 2 m long
+
+
+def _scan(index: int, pose: tuple[float, float, float] | None, *, odometry: bool = False) -> Scan:
+    ranges = np.full(_BEAMS, 2.0, np.float32)
+    placed = None if pose is None else np.array(pose, dtype=np.float64)
+    if odometry:
+        return Scan(
+            index, float(index), ranges, -math.pi, 2 * math.pi / _BEAMS, 30.0, odometry=placed
+        )
+    return Scan(index, float(index), ranges, -math.pi, 2 * math.pi / _BEAMS, 30.0, reference=placed)
+
+
+def _line(n: int, step: float) -> list[Scan]:
+    """``n`` scans driving along +x, ``step`` metres apart."""
+    return [_scan(i, (i * step, 0.0, 0.0)) for i in range(n)]
+
+
+def test_neighbours_are_spaced_on_both_sides_up_to_the_count():
+    scans = _line(40, 0.25)
+    # 0.5 m apart: every second scan, two on each side.
+    assert neighbours(log_poses(scans), 20, 100, Context(neighbours=2)) == [16, 18, 22, 24]
+    assert neighbours(
+        log_poses(scans), 20, 100, Context(neighbours=3, spacing=0.75, reach=3.0)
+    ) == [
+        11,
+        14,
+        17,
+        23,
+        26,
+        29,
+    ]
+    assert neighbours(log_poses(scans), 20, 100, Context()) == []  # the scan alone by default
+
+
+def test_the_walk_stops_at_its_reach_and_at_the_log_ends():
+    scans = _line(40, 0.25)
+    # 0.6 m of path holds one neighbour at 0.5 m, not a second at 1.0 m.
+    assert neighbours(log_poses(scans), 20, 100, Context(neighbours=2, reach=0.6)) == [18, 22]
+    assert neighbours(log_poses(scans), 1, 100, Context(neighbours=2)) == [3, 5]
+    # A robot standing still: no scan is ever far enough, and the walk gives up.
+    still = [_scan(i, (0.0, 0.0, 0.0)) for i in range(30)]
+    assert neighbours(log_poses(still), 15, 100, Context(neighbours=2, scans=10)) == []
+
+
+def test_a_turn_on_the_spot_makes_a_neighbour():
+    scans = [_scan(i, (0.0, 0.0, 0.2 * i)) for i in range(10)]
+    assert neighbours(log_poses(scans), 0, 100, Context(neighbours=2, turn=0.35)) == [2, 4]
+
+
+def test_no_neighbour_is_nearer_the_other_scan_than_its_own():
+    scans = _line(40, 0.25)
+    # The other scan 3 ahead: scan 22 is nearer it, so the walk ahead ends there.
+    assert neighbours(log_poses(scans), 20, 23, Context(neighbours=2)) == [16, 18]
+    sides = neighbours(log_poses(scans), 23, 20, Context(neighbours=2))
+    assert sides == [25, 27]
+    assert not set(sides) & set(neighbours(log_poses(scans), 20, 23, Context(neighbours=2)))
+
+
+def test_a_scan_without_a_pose_has_no_neighbours_and_stops_the_walk():
+    scans = _line(20, 0.5)
+    assert (
+        neighbours(
+            log_poses([*scans[:10], _scan(10, None), *scans[11:]]), 10, 100, Context(neighbours=2)
+        )
+        == []
+    )
+    gap = [*scans[:12], _scan(12, None), *scans[13:]]
+    assert neighbours(log_poses(gap), 10, 100, Context(neighbours=2)) == [8, 9, 11]
+
+
+def test_odometry_places_the_neighbours_where_the_log_has_no_reference():
+    scans = [_scan(i, (i * 0.5, 0.0, 0.0), odometry=True) for i in range(10)]
+    assert neighbours(log_poses(scans), 5, 100, Context(neighbours=1)) == [4, 6]
+
+
+@pytest.mark.parametrize("turn", [0.0, 1.1])
+def test_neighbours_points_land_where_they_are_in_the_world(turn):
+    centre = (1.0, -2.0, turn)
+    near = (1.5, -1.0, turn + math.pi / 2)
+    scans = [_scan(0, centre), _scan(1, near)]
+    got = local_points(scans, log_poses(scans), 0, 100, Context(neighbours=1, spacing=0.5))
+    assert got.shape == (2 * _BEAMS, 2)
+    own = scans[0].points()
+    np.testing.assert_allclose(got[:_BEAMS], own)
+    # The neighbour's beam ends, taken to the world and back into the centre scan's frame.
+    world = se2.transform_points(np.array(near), scans[1].points())
+    expect = se2.transform_points(se2.inverse(np.array(centre)), world)
+    np.testing.assert_allclose(got[_BEAMS:], expect, atol=1e-9)
+    # Without neighbours the side is the scan's own points, untouched.
+    np.testing.assert_array_equal(local_points(scans, log_poses(scans), 0, 100, Context()), own)
+
+
+def test_labelled_edges_read_with_context_take_each_side_from_its_local_map(office_edges):
+    from vgm_studio.datasets import open_log
+    from vgm_studio.model.training import read_labelled
+
+    context = Context(neighbours=2)
+    plain = read_labelled([office_edges], progress=False)
+    wide = read_labelled([office_edges], progress=False, context=context)
+    alone = read_labelled([office_edges], progress=False, context=Context())
+    log = open_log(plain.edges[0].log_path).scans
+    grew = 0
+    for edge, p, w, a in zip(plain.edges, plain.samples, wide.samples, alone.samples, strict=True):
+        np.testing.assert_array_equal(a.prev, p.prev)  # no neighbours: the scans as before
+        np.testing.assert_array_equal(a.cur, p.cur)
+        prev = local_points(log, log_poses(log), edge.a, edge.b, context)
+        cur = se2.transform_points(
+            np.array(edge.estimate), local_points(log, log_poses(log), edge.b, edge.a, context)
+        )
+        np.testing.assert_allclose(w.prev, prev.astype(np.float32))
+        np.testing.assert_allclose(w.cur, cur.astype(np.float32), atol=1e-5)
+        assert (w.inlier_ratio, w.residual) == (p.inlier_ratio, p.residual)
+        grew += len(w.prev) > len(p.prev)
+    assert grew > len(plain.edges) // 2
+
+
+def _cli(*args: object) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "vgm_studio.tools.cmd", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
+def test_a_model_trained_with_context_keeps_it_and_reads_edges_with_it(office_edges, tmp_path):
+    from vgm_studio.model.metrics import roc_auc
+    from vgm_studio.model.training import read_labelled
+    from vgm_studio.model.validator import Validator
+
+    model = tmp_path / "context.pt"
+    short = ("--epochs", 1, "--epoch-size", 64)
+    trained = _cli("train", office_edges, "--context", 2, *short, "--out", model)
+    assert trained.returncode == 0, trained.stderr
+    validator = Validator.load(model)
+    assert validator.context == Context(neighbours=2)
+    wide = read_labelled([office_edges], progress=False, context=validator.context)
+    p = validator.predict(wide.edges)
+    np.testing.assert_allclose(p, validator.predict_samples(wide.samples), atol=1e-6)
+    report = tmp_path / "eval.json"
+    judged = _cli("eval", model, office_edges, "--json", report)
+    assert judged.returncode == 0, judged.stderr
+    assert json.loads(report.read_text())["auc"] == pytest.approx(roc_auc(wide.labels, p))
+    # Its weights read other inputs than a single-scan run's: no warm start from them.
+    again = _cli("train", office_edges, "--init", model, *short, "--out", tmp_path / "b.pt")
+    assert again.returncode == 1 and "--init needs a vgmnet one" in again.stderr
+    assert "Traceback" not in again.stderr
+    bad = _cli("train", office_edges, "--context", -1, "--out", tmp_path / "c.pt")
+    assert bad.returncode == 2 and "--context" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_slam_refuses_a_model_that_reads_local_maps_in_one_line(tmp_path):
+    from vgm_studio.model.checkpoint import load_checkpoint, save_checkpoint
+    from vgm_studio.model.registry import BUNDLED_MODEL
+    from vgm_studio.simulation.simulate import SimConfig, simulate
+
+    checkpoint = load_checkpoint(BUNDLED_MODEL)
+    checkpoint.context = Context(neighbours=2)
+    model = tmp_path / "context.pt"
+    save_checkpoint(model, checkpoint)
+    log = simulate(SimConfig(preset="loop", seed=2, num_beams=181, laps=0.3), tmp_path)
+    proc = _cli("slam", log, "--model", model, "--json", tmp_path / "out.json")
+    assert proc.returncode == 1
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr
+    assert f"{model}: reads each scan with 2 neighbours a side" in lines[0]
+    assert not (tmp_path / "out.json").exists()
+
+
+def test_a_validator_reads_edges_with_its_own_context(office_edges):
+    from vgm_studio.model.checkpoint import load_checkpoint
+    from vgm_studio.model.registry import BUNDLED_MODEL
+    from vgm_studio.model.training import read_labelled
+    from vgm_studio.model.validator import Validator
+
+    checkpoint = load_checkpoint(BUNDLED_MODEL)
+    checkpoint.context = Context(neighbours=2)
+    validator = Validator(checkpoint, device="cpu")
+    wide = read_labelled([office_edges], progress=False, context=checkpoint.context)
+    single = read_labelled([office_edges], progress=False)
+    p = validator.predict(wide.edges)
+    np.testing.assert_allclose(p, validator.predict_samples(wide.samples), atol=1e-6)
+    # The bundled weights judge the local maps otherwise than the scans alone.
+    assert np.abs(p - validator.predict_samples(single.samples)).max() > 0.01
