@@ -6,12 +6,14 @@ import json
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from vgm_studio.core import se2
 from vgm_studio.datasets import Scan
+from vgm_studio.errors import InputError
 from vgm_studio.model.context import Context, local_points, log_poses, neighbours
 
 _BEAMS = 8  # a ring of beams 45° apart, each 2 m long
@@ -166,22 +168,63 @@ def test_a_model_trained_with_context_keeps_it_and_reads_edges_with_it(office_ed
     assert bad.returncode == 2 and "--context" in bad.stderr and "Traceback" not in bad.stderr
 
 
-def test_slam_refuses_a_model_that_reads_local_maps_in_one_line(tmp_path):
+def _context_model(folder: Path) -> Path:
+    """The bundled weights, declared to read two neighbours a side."""
     from vgm_studio.model.checkpoint import load_checkpoint, save_checkpoint
     from vgm_studio.model.registry import BUNDLED_MODEL
-    from vgm_studio.simulation.simulate import SimConfig, simulate
 
     checkpoint = load_checkpoint(BUNDLED_MODEL)
     checkpoint.context = Context(neighbours=2)
-    model = tmp_path / "context.pt"
-    save_checkpoint(model, checkpoint)
-    log = simulate(SimConfig(preset="loop", seed=2, num_beams=181, laps=0.3), tmp_path)
-    proc = _cli("slam", log, "--model", model, "--json", tmp_path / "out.json")
-    assert proc.returncode == 1
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in proc.stderr
-    assert f"{model}: reads each scan with 2 neighbours a side" in lines[0]
-    assert not (tmp_path / "out.json").exists()
+    save_checkpoint(folder / "context.pt", checkpoint)
+    return folder / "context.pt"
+
+
+def test_slam_feeds_a_local_map_model_each_keyframe_with_its_neighbours(tmp_path):
+    from vgm_studio.datasets import open_log
+    from vgm_studio.matching.matcher import ScanMatcher
+    from vgm_studio.model.features import sample_from_scans
+    from vgm_studio.model.validator import Validator
+    from vgm_studio.simulation.simulate import SimConfig, simulate
+    from vgm_studio.slam.config import ValidationConfig
+    from vgm_studio.slam.edges import SlamEdge
+    from vgm_studio.slam.validation import EdgeValidator, LocalMaps
+
+    model = _context_model(tmp_path)
+    log = open_log(simulate(SimConfig(preset="loop", seed=2, num_beams=181, laps=0.3), tmp_path))
+    # The odometry, not the reference the log also has: the run's poses place the neighbours.
+    poses = np.array([s.odometry for s in log.scans])
+    keyframes = np.arange(0, len(log), 10)
+    keyed = [log.scans[i] for i in keyframes]
+    config = ValidationConfig(model=model, second_look=1, loop_threshold=None)
+    validator = EdgeValidator(config, keyed, local=LocalMaps(log.scans, poses, keyframes))
+    a, b = 3, 4
+    match = ScanMatcher().match(keyed[a], keyed[b], se2.between(poses[30], poses[40]))
+    edge = SlamEdge("sequential", a, b, match.estimate, match)
+    validator([edge])
+    context = Context(neighbours=2)
+    sides = [local_points(log.scans, poses, c, o, context) for c, o in ((30, 40), (40, 30))]
+    assert all(len(side) > len(keyed[0].points()) for side in sides)
+    want = Validator.load(model).predict_samples(
+        [sample_from_scans(*sides, match.estimate, match.figures())]
+    )
+    assert edge.p_success == pytest.approx(float(want[0]), abs=1e-6)
+    # Without where to find the neighbours, the validator is refused, not fed single scans.
+    with pytest.raises(InputError, match="reads each scan with 2 neighbours a side"):
+        EdgeValidator(config, keyed)
+
+
+def test_slam_runs_with_a_local_map_model(tmp_path):
+    model = _context_model(tmp_path)
+    from vgm_studio.simulation.simulate import SimConfig, simulate
+
+    log = simulate(SimConfig(preset="loop", seed=2, num_beams=181, laps=1.2), tmp_path)
+    out = tmp_path / "out.json"
+    proc = _cli("slam", log, "--model", model, "--json", out)
+    assert proc.returncode == 0, proc.stderr
+    run = json.loads(out.read_text())
+    assert run["loops_kept"] > 0
+    loops = [e for e in run["edges"] if e["kind"] == "loop"]
+    assert all(0.0 <= e["p_success"] <= 1.0 for e in loops if e["p_success"] is not None)
 
 
 def test_a_validator_reads_edges_with_its_own_context(office_edges):

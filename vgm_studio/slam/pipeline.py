@@ -19,7 +19,7 @@ from vgm_studio.slam.config import SlamConfig
 from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.frontend import FrontEnd, fallback_edge, graph_edge
 from vgm_studio.slam.odometry import scan_odometry
-from vgm_studio.slam.validation import EdgeValidator, pair_judge
+from vgm_studio.slam.validation import EdgeValidator, LocalMaps, pair_judge
 
 MIN_POINTS = 10
 
@@ -156,7 +156,10 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
     scans = [dataclasses.replace(log.scans[i], keep_points=True) for i in keyframes]
     reference = dense_reference(log, odometry)
     validator = EdgeValidator(
-        config.validation, scans, None if reference is None else reference[keyframes]
+        config.validation,
+        scans,
+        None if reference is None else reference[keyframes],
+        LocalMaps(log.scans, odometry, keyframes),
     )
     t = time.perf_counter()
     front = FrontEnd(

@@ -1,13 +1,16 @@
 """Edge validation: which matched pairs may enter the pose graph.
 
 ``none`` keeps all; the model validators ask a trained checkpoint for p(success) in batches;
-``reference`` keeps the edges whose estimate lands on the reference relative pose.
+``reference`` keeps the edges whose estimate lands on the reference relative pose. A model
+trained on local maps (``--context``) reads each keyframe with its neighbour scans from the
+log, placed by the run's own odometry (``LocalMaps``).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -19,6 +22,7 @@ from vgm_studio.datasets.scans import Scan
 from vgm_studio.errors import InputError
 from vgm_studio.matching.matcher import MatchResult
 from vgm_studio.matching.reference_labels import reference_label
+from vgm_studio.model.context import local_points, neighbours
 from vgm_studio.model.features import sample_from_scans
 from vgm_studio.model.registry import VALIDATOR_MODELS
 from vgm_studio.slam.config import ValidationConfig
@@ -29,6 +33,35 @@ if TYPE_CHECKING:
     from vgm_studio.model.validator import Validator
 
 
+@dataclass
+class LocalMaps:
+    """Where a keyframe's neighbours come from, for a model that reads local maps.
+
+    Attributes:
+        scans: Every scan of the log.
+        poses: (N, 3) every scan's pose from the run's odometry: locally as good as the
+            reference poses the model was trained with, over the metre or two it spans.
+        keyframes: Each keyframe's index in the log.
+    """
+
+    scans: Sequence[Scan]
+    poses: NDArray[np.float64]
+    keyframes: NDArray[np.int64]
+    # A keyframe's map is asked for again by every loop it takes part in.
+    _made: dict[tuple[int, tuple[int, ...]], NDArray[np.float64]] = field(
+        default_factory=dict, repr=False
+    )
+
+    def points(self, a: int, b: int, model: Validator) -> NDArray[np.float64]:
+        """Keyframe ``a``'s side of its pair with keyframe ``b``, as ``model`` reads it."""
+        centre, other = int(self.keyframes[a]), int(self.keyframes[b])
+        near = tuple(neighbours(self.poses, centre, other, model.context))
+        key = (centre, near)
+        if key not in self._made:
+            self._made[key] = local_points(self.scans, self.poses, centre, other, model.context)
+        return self._made[key]
+
+
 class EdgeValidator:
     """Sets ``p_success`` and ``kept`` of edges, a block at a time.
 
@@ -36,6 +69,8 @@ class EdgeValidator:
         config: Which validator, its checkpoint and thresholds.
         scans: The keyframes' scans, by keyframe index.
         reference: (K, 3) reference poses of the keyframes (``reference`` only).
+        local: Where keyframes' neighbours are found; needed by a model trained on local
+            maps, unused by others.
 
     Raises:
         InputError: The checkpoint is missing, unreadable or of another model, or
@@ -47,10 +82,12 @@ class EdgeValidator:
         config: ValidationConfig,
         scans: Sequence[Scan],
         reference: NDArray[np.float64] | None = None,
+        local: LocalMaps | None = None,
     ) -> None:
         self.config = config
         self._scans = scans
         self._reference = reference
+        self._local = local
         if config.validator == "reference" and reference is None:
             raise InputError(
                 None,
@@ -59,6 +96,8 @@ class EdgeValidator:
             )
         self._rate = _Rater(config) if config.validator in VALIDATOR_MODELS else None
         self.model: Validator | None = None if self._rate is None else self._rate.model
+        if self.model is not None and local is None:
+            self.model.require_single_scans("this run")
         self.precision_cut: float | None = None
         if config.loop_precision is not None:
             if self.model is None:
@@ -80,10 +119,7 @@ class EdgeValidator:
                 e.p_success = float(e.kept)
         else:
             assert self.model is not None and self._rate is not None
-            p = self._rate(
-                (self._scans[e.a].points(), self._scans[e.b].points(), e.estimate, e.match)
-                for e in edges
-            )
+            p = self._rate((*self._sides(e.a, e.b), e.estimate, e.match) for e in edges)
             bar = self.loop_bar
             assert bar is not None  # a model gives one
             loop = np.array([e.kind == "loop" for e in edges])
@@ -94,6 +130,13 @@ class EdgeValidator:
         # later. Sequential edges the validator rejects must say so too.
         for e in edges:
             e.validated = e.kept
+
+    def _sides(self, a: int, b: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The points of keyframes ``a`` and ``b`` as the model reads them."""
+        model = self.model
+        if model is None or not model.context.neighbours or self._local is None:
+            return self._scans[a].points(), self._scans[b].points()
+        return self._local.points(a, b, model), self._local.points(b, a, model)
 
     @property
     def threshold(self) -> float:
@@ -120,6 +163,9 @@ def pair_judge(config: ValidationConfig) -> Judge | None:
         return None
     rate = _Rater(config)
 
+    # A model trained on local maps reads the two scans alone here: the scans after them are
+    # not placed yet. Sides without neighbours are among what it was trained on (a scan with
+    # none within reach, the ends of a log).
     def judge(first: Scan, second: Scan, matches: Sequence[MatchResult]) -> NDArray[np.float64]:
         a, b = first.points(), second.points()
         return rate((a, b, m.estimate, m) for m in matches)
@@ -158,5 +204,4 @@ def _load(path: Path | None, validator: str) -> Validator:
     model = shared_validator(path)
     if model.name not in VALIDATOR_MODELS[validator]:
         raise InputError(path, f"is a {model.name} checkpoint, not one for --validator {validator}")
-    model.require_single_scans("slam")
     return model
