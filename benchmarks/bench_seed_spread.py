@@ -151,6 +151,7 @@ def _job(job: tuple[str, str, int]) -> str:
             "cell": args.cell if model == "vgmnet" else None,
             "occlude": occlude,
             "context": args.context,
+            "context_matched": bool(args.context) and training.context.matched,
             "threshold": checkpoint.threshold,
             "p": [round(float(p), 6) for p in probs],
             "labels": test.labels.tolist(),

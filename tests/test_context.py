@@ -6,6 +6,7 @@ import json
 import math
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,7 @@ import pytest
 from vgm_studio.core import se2
 from vgm_studio.datasets import Scan
 from vgm_studio.errors import InputError
-from vgm_studio.model.context import Context, local_points, log_poses, neighbours
+from vgm_studio.model.context import Context, LocalMapper, log_poses, neighbours
 
 _BEAMS = 8  # a ring of beams 45° apart, each 2 m long
 
@@ -93,11 +94,12 @@ def test_odometry_places_the_neighbours_where_the_log_has_no_reference():
 
 
 @pytest.mark.parametrize("turn", [0.0, 1.1])
-def test_neighbours_points_land_where_they_are_in_the_world(turn):
+def test_neighbours_points_land_where_their_poses_put_them(turn):
     centre = (1.0, -2.0, turn)
     near = (1.5, -1.0, turn + math.pi / 2)
     scans = [_scan(0, centre), _scan(1, near)]
-    got = local_points(scans, log_poses(scans), 0, 100, Context(neighbours=1, spacing=0.5))
+    alone = Context(neighbours=1, spacing=0.5, matched=False)
+    got = LocalMapper(scans, log_poses(scans), alone).points(0, 100)
     assert got.shape == (2 * _BEAMS, 2)
     own = scans[0].points()
     np.testing.assert_allclose(got[:_BEAMS], own)
@@ -106,7 +108,56 @@ def test_neighbours_points_land_where_they_are_in_the_world(turn):
     expect = se2.transform_points(se2.inverse(np.array(centre)), world)
     np.testing.assert_allclose(got[_BEAMS:], expect, atol=1e-9)
     # Without neighbours the side is the scan's own points, untouched.
-    np.testing.assert_array_equal(local_points(scans, log_poses(scans), 0, 100, Context()), own)
+    np.testing.assert_array_equal(LocalMapper(scans, log_poses(scans), Context()).points(0, 9), own)
+
+
+@pytest.fixture(scope="module")
+def drifting_log(tmp_path_factory):
+    """A simulated log whose odometry drifts from its true poses (``reference``)."""
+    from vgm_studio.datasets import open_log
+    from vgm_studio.simulation.simulate import SimConfig, simulate
+
+    folder = tmp_path_factory.mktemp("drift")
+    return open_log(simulate(SimConfig(preset="office", seed=3, num_beams=181, laps=0.3), folder))
+
+
+def test_a_neighbour_is_matched_to_its_centre_from_a_poor_guess(drifting_log):
+    scans = drifting_log.scans
+    truth = log_poses(scans)
+    # The log's odometry, each pose knocked a further 5 cm and 2° off at random.
+    rng = np.random.default_rng(0)
+    guesses = np.array([s.odometry for s in scans])
+    guesses += rng.normal(0.0, [0.05, 0.05, math.radians(2.0)], guesses.shape)
+    mapper = LocalMapper(scans, guesses, Context(neighbours=2))
+    off_guess, off_match = [], []
+    for centre in range(20, len(scans) - 20, 10):
+        for j in neighbours(guesses, centre, len(scans) * 2, mapper.context):
+            true = se2.between(truth[centre], truth[j])
+            guess = se2.between(guesses[centre], guesses[j])
+            off_guess.append(float(np.hypot(*(guess[:2] - true[:2]))))
+            placed = mapper.placed(centre, j)
+            if placed is not None:
+                off_match.append(float(np.hypot(*(placed[:2] - true[:2]))))
+    assert len(off_match) >= 0.8 * len(off_guess) >= 40
+    assert np.median(off_match) < min(0.02, np.median(off_guess) / 3)
+    assert np.percentile(off_match, 90) < 0.05
+
+
+def test_a_neighbour_whose_match_does_not_hold_is_left_out(drifting_log):
+    scans = list(drifting_log.scans)
+    poses = log_poses(scans)
+    context = Context(neighbours=2)
+    centre = 40
+    near = neighbours(poses, centre, 1000, context)
+    assert near
+    # One neighbour replaced by a scan of somewhere else (its ranges reversed, same pose).
+    odd = near[0]
+    scans[odd] = replace(scans[odd], ranges=scans[odd].ranges[::-1].copy())
+    mapper = LocalMapper(scans, poses, context)
+    assert mapper.placed(centre, odd) is None
+    got = mapper.points(centre, 1000)
+    kept = [j for j in near if mapper.placed(centre, j) is not None]
+    assert len(got) == len(scans[centre].points()) + sum(len(scans[j].points()) for j in kept)
 
 
 def test_labelled_edges_read_with_context_take_each_side_from_its_local_map(office_edges):
@@ -118,14 +169,13 @@ def test_labelled_edges_read_with_context_take_each_side_from_its_local_map(offi
     wide = read_labelled([office_edges], progress=False, context=context)
     alone = read_labelled([office_edges], progress=False, context=Context())
     log = open_log(plain.edges[0].log_path).scans
+    mapper = LocalMapper(log, log_poses(log), context)
     grew = 0
     for edge, p, w, a in zip(plain.edges, plain.samples, wide.samples, alone.samples, strict=True):
         np.testing.assert_array_equal(a.prev, p.prev)  # no neighbours: the scans as before
         np.testing.assert_array_equal(a.cur, p.cur)
-        prev = local_points(log, log_poses(log), edge.a, edge.b, context)
-        cur = se2.transform_points(
-            np.array(edge.estimate), local_points(log, log_poses(log), edge.b, edge.a, context)
-        )
+        prev = mapper.points(edge.a, edge.b)
+        cur = se2.transform_points(np.array(edge.estimate), mapper.points(edge.b, edge.a))
         np.testing.assert_allclose(w.prev, prev.astype(np.float32))
         np.testing.assert_allclose(w.cur, cur.astype(np.float32), atol=1e-5)
         assert (w.inlier_ratio, w.residual) == (p.inlier_ratio, p.residual)
@@ -202,7 +252,8 @@ def test_slam_feeds_a_local_map_model_each_keyframe_with_its_neighbours(tmp_path
     edge = SlamEdge("sequential", a, b, match.estimate, match)
     validator([edge])
     context = Context(neighbours=2)
-    sides = [local_points(log.scans, poses, c, o, context) for c, o in ((30, 40), (40, 30))]
+    mapper = LocalMapper(log.scans, poses, context)
+    sides = [mapper.points(c, o) for c, o in ((30, 40), (40, 30))]
     assert all(len(side) > len(keyed[0].points()) for side in sides)
     want = Validator.load(model).predict_samples(
         [sample_from_scans(*sides, match.estimate, match.figures())]

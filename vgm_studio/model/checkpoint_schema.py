@@ -43,6 +43,8 @@ class ContextMeta(BaseModel):
     turn: Annotated[Finite, Field(ge=0.0, le=7.0)]
     reach: Annotated[Finite, Field(ge=0.0, le=1000.0)]
     scans: Annotated[int, Field(ge=1, le=1_000_000)]
+    matched: bool = True
+    min_inliers: Annotated[Finite, Field(ge=0.0, le=1.0)] = 0.3
 
 
 class CheckpointMeta(BaseModel):

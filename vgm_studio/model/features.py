@@ -18,7 +18,7 @@ from tqdm import tqdm
 from vgm_studio.core import se2
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
-from vgm_studio.model.context import Context, Poses, local_points, log_poses
+from vgm_studio.model.context import Context, LocalMapper, log_poses
 from vgm_studio.vgm.grid import VGMParams, batch_cells
 
 
@@ -79,7 +79,7 @@ def load_samples(
     """Reads every edge's two scans (each log once) and returns one sample per edge; with a
     ``context`` each side is its scan's local map (``model/context.py``)."""
     scans = scans or EdgeScans()
-    poses: dict[int, Poses] = {}  # each log's, worked out once
+    mappers: dict[int, LocalMapper] = {}  # one per log: its matches are made once
     out = []
     for edge in tqdm(edges, desc="reading scans", unit="edge", disable=None if progress else True):
         a, b = scans.scans(edge)
@@ -87,11 +87,10 @@ def load_samples(
             prev, cur = a.points(), b.points()
         else:
             log = scans.log_for(edge).scans
-            if id(log) not in poses:
-                poses[id(log)] = log_poses(log)
-            placed = poses[id(log)]
-            prev = local_points(log, placed, edge.a, edge.b, context)
-            cur = local_points(log, placed, edge.b, edge.a, context)
+            if id(log) not in mappers:
+                mappers[id(log)] = LocalMapper(log, log_poses(log), context)
+            prev = mappers[id(log)].points(edge.a, edge.b)
+            cur = mappers[id(log)].points(edge.b, edge.a)
         out.append(sample_from_scans(prev, cur, edge.estimate, edge.match))
     return out
 

@@ -22,7 +22,7 @@ from vgm_studio.datasets.scans import Scan
 from vgm_studio.errors import InputError
 from vgm_studio.matching.matcher import MatchResult
 from vgm_studio.matching.reference_labels import reference_label
-from vgm_studio.model.context import local_points, neighbours
+from vgm_studio.model.context import Context, LocalMapper
 from vgm_studio.model.features import sample_from_scans
 from vgm_studio.model.registry import VALIDATOR_MODELS
 from vgm_studio.slam.config import ValidationConfig
@@ -39,27 +39,23 @@ class LocalMaps:
 
     Attributes:
         scans: Every scan of the log.
-        poses: (N, 3) every scan's pose from the run's odometry: locally as good as the
-            reference poses the model was trained with, over the metre or two it spans.
+        poses: (N, 3) every scan's pose from the run's odometry: which scans are a
+            keyframe's neighbours, and where each neighbour's match to it starts.
         keyframes: Each keyframe's index in the log.
     """
 
     scans: Sequence[Scan]
     poses: NDArray[np.float64]
     keyframes: NDArray[np.int64]
-    # A keyframe's map is asked for again by every loop it takes part in.
-    _made: dict[tuple[int, tuple[int, ...]], NDArray[np.float64]] = field(
-        default_factory=dict, repr=False
-    )
+    _mappers: dict[Context, LocalMapper] = field(default_factory=dict, repr=False)
 
     def points(self, a: int, b: int, model: Validator) -> NDArray[np.float64]:
         """Keyframe ``a``'s side of its pair with keyframe ``b``, as ``model`` reads it."""
-        centre, other = int(self.keyframes[a]), int(self.keyframes[b])
-        near = tuple(neighbours(self.poses, centre, other, model.context))
-        key = (centre, near)
-        if key not in self._made:
-            self._made[key] = local_points(self.scans, self.poses, centre, other, model.context)
-        return self._made[key]
+        mapper = self._mappers.get(model.context)
+        if mapper is None:
+            mapper = LocalMapper(self.scans, self.poses, model.context)
+            self._mappers[model.context] = mapper
+        return mapper.points(int(self.keyframes[a]), int(self.keyframes[b]))
 
 
 class EdgeValidator:
