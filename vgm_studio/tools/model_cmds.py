@@ -84,8 +84,9 @@ def train(
             min=0,
             max=16,
             help="Draw each side of a pair from its scan and up to this many neighbour scans "
-            "a side in the log (0: the scan alone). eval and predict read edges the same way; "
-            "slam and the background trainer take single-scan models only.",
+            "a side in the log, each matched to the scan (0: the scan alone). eval, predict "
+            "and slam read edges the same way; the background trainer trains single-scan "
+            "versions.",
         ),
     ] = 0,
     seed: Annotated[int, typer.Option(help="Seed for split, draws and weights.")] = 0,
