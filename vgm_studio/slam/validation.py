@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -22,7 +22,7 @@ from vgm_studio.datasets.scans import Scan
 from vgm_studio.errors import InputError
 from vgm_studio.matching.matcher import MatchResult
 from vgm_studio.matching.reference_labels import reference_label
-from vgm_studio.model.context import Context, LocalMapper
+from vgm_studio.model.context import LocalMapper
 from vgm_studio.model.features import sample_from_scans
 from vgm_studio.model.registry import VALIDATOR_MODELS
 from vgm_studio.slam.config import ValidationConfig
@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from vgm_studio.model.validator import Validator
 
 
-@dataclass
+@dataclass(frozen=True)
 class LocalMaps:
     """Where a keyframe's neighbours come from, for a model that reads local maps.
 
@@ -47,15 +47,6 @@ class LocalMaps:
     scans: Sequence[Scan]
     poses: NDArray[np.float64]
     keyframes: NDArray[np.int64]
-    _mappers: dict[Context, LocalMapper] = field(default_factory=dict, repr=False)
-
-    def points(self, a: int, b: int, model: Validator) -> NDArray[np.float64]:
-        """Keyframe ``a``'s side of its pair with keyframe ``b``, as ``model`` reads it."""
-        mapper = self._mappers.get(model.context)
-        if mapper is None:
-            mapper = LocalMapper(self.scans, self.poses, model.context)
-            self._mappers[model.context] = mapper
-        return mapper.points(int(self.keyframes[a]), int(self.keyframes[b]))
 
 
 class EdgeValidator:
@@ -83,7 +74,6 @@ class EdgeValidator:
         self.config = config
         self._scans = scans
         self._reference = reference
-        self._local = local
         if config.validator == "reference" and reference is None:
             raise InputError(
                 None,
@@ -92,8 +82,14 @@ class EdgeValidator:
             )
         self._rate = _Rater(config) if config.validator in VALIDATOR_MODELS else None
         self.model: Validator | None = None if self._rate is None else self._rate.model
-        if self.model is not None and local is None:
-            self.model.require_single_scans("this run")
+        # Set where the model reads local maps: each keyframe's, made once.
+        self._maps: tuple[LocalMapper, NDArray[np.int64]] | None = None
+        if self.model is not None and self.model.context.neighbours:
+            if local is None:
+                self.model.require_single_scans("this run")
+            else:
+                mapper = LocalMapper(local.scans, local.poses, self.model.context)
+                self._maps = (mapper, local.keyframes)
         self.precision_cut: float | None = None
         if config.loop_precision is not None:
             if self.model is None:
@@ -129,10 +125,11 @@ class EdgeValidator:
 
     def _sides(self, a: int, b: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The points of keyframes ``a`` and ``b`` as the model reads them."""
-        model = self.model
-        if model is None or not model.context.neighbours or self._local is None:
+        if self._maps is None:
             return self._scans[a].points(), self._scans[b].points()
-        return self._local.points(a, b, model), self._local.points(b, a, model)
+        mapper, keyframes = self._maps
+        ka, kb = int(keyframes[a]), int(keyframes[b])
+        return mapper.points(ka, kb), mapper.points(kb, ka)
 
     @property
     def threshold(self) -> float:
