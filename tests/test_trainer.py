@@ -13,6 +13,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 import typer
@@ -24,7 +25,8 @@ from vgm_studio.labels.records import NewVersion
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.matching.edges import Edge, read_edges
 from vgm_studio.model import Validator
-from vgm_studio.model.checkpoint import load_checkpoint
+from vgm_studio.model.checkpoint import load_checkpoint, save_checkpoint
+from vgm_studio.model.context import Context
 from vgm_studio.tools import trainer_cmds
 from vgm_studio.trainer import PromotionWatcher, registry
 from vgm_studio.trainer.dataset import held_out_split, majority_labels
@@ -312,3 +314,22 @@ def _models_app() -> typer.Typer:
     app = typer.Typer()
     app.command()(trainer_cmds.models)
     return app
+
+
+def test_the_guard_judges_a_model_in_use_that_reads_local_maps_on_local_maps(
+    trained, tmp_path, balanced_office_edges
+):
+    """A model in use trained on local maps (``train --context``) is scored on the guard
+    edges drawn its way, not on the single scans the background trainer's versions read."""
+    folder = _copy(trained, tmp_path)
+    path = registry.model_path(folder, 1)
+    wide = replace(load_checkpoint(path), context=Context(neighbours=2))
+    save_checkpoint(path, wide)
+    config = TrainerConfig(nice=0, fit=FAST, base=(balanced_office_edges,), held_out=0.25)
+    worker = Worker(folder, config, log=lambda _s: None)
+    guard = worker._guard_of("v1")
+    assert guard is not None and len(guard.labels) == len(worker.base.guard_edges) > 10
+    validator = Validator.load(path, device="cpu")
+    assert np.allclose(guard.p, validator.predict(worker.base.guard_edges))
+    single = validator.predict_samples(worker.base.guard_samples)
+    assert np.abs(guard.p - single).max() > 1e-3  # the neighbours were drawn
