@@ -59,10 +59,12 @@ def _stem(
     cell: float | None = None,
     occlude: float = 0.0,
     context: int = 0,
+    covisible: bool = False,
 ) -> str:
     tag = f"{model}-{inputs}" if model == "vgmnet" and inputs != "default" else model
     cuts = f"-occlude{occlude:g}" if model == "vgmnet" and occlude else ""
     near = f"-context{context}" if model == "vgmnet" and context else ""
+    near += "-covisible" if near and covisible else ""
     return f"{building}-{tag}{grid_tag(model, cell)}{cuts}{near}-seed{seed}"
 
 
@@ -86,7 +88,8 @@ def _load(args: argparse.Namespace) -> list[str]:
 
     folds = _folds(args)
     files = sorted({p for f in folds for p in f.train} | {f.test for f in folds})
-    data = read_labelled(files, progress=False, context=Context(neighbours=args.context))
+    context = Context(neighbours=args.context, covisible=args.covisible)
+    data = read_labelled(files, progress=False, context=context)
     origin = [f["path"] for f in data.files for _ in range(f["used"])]
     _LOADED[:] = [_Loaded(args, {f.held_out: f for f in folds}, data, origin)]
     return [f.held_out for f in folds]
@@ -112,7 +115,9 @@ def _job(job: tuple[str, str, int]) -> str:
     loaded = _LOADED[0]
     args = loaded.args
     occlude = args.occlude if model == "vgmnet" else 0.0  # rgb-baseline is never cut
-    stem = _stem(building, model, seed, args.inputs, args.cell, occlude, args.context)
+    stem = _stem(
+        building, model, seed, args.inputs, args.cell, occlude, args.context, args.covisible
+    )
     result = Path(args.out) / f"{stem}.json"
     if result.exists():
         return f"{result.stem}: done before"
@@ -152,6 +157,7 @@ def _job(job: tuple[str, str, int]) -> str:
             "occlude": occlude,
             "context": args.context,
             "context_matched": bool(args.context) and training.context.matched,
+            "context_covisible": bool(args.context) and training.context.covisible,
             "threshold": checkpoint.threshold,
             "p": [round(float(p), 6) for p in probs],
             "labels": test.labels.tolist(),
@@ -208,6 +214,7 @@ def _summary(
     cell: float | None = None,
     occlude: float = 0.0,
     context: int = 0,
+    covisible: bool = False,
 ) -> None:
     """Per building each seed's accuracy and, per seed pairing, the loops only one network
     judged right; then per pairing the buildings vgmnet (read with ``inputs``) is ahead on."""
@@ -216,8 +223,14 @@ def _summary(
         r
         for r in runs
         if r["model"] != "vgmnet"
-        or (r.get("inputs", "default"), r.get("cell"), r.get("occlude", 0.0), r.get("context", 0))
-        == (inputs, cell, occlude, context)
+        or (
+            r.get("inputs", "default"),
+            r.get("cell"),
+            r.get("occlude", 0.0),
+            r.get("context", 0),
+            r.get("context_covisible", False),
+        )
+        == (inputs, cell, occlude, context, covisible and bool(context))
     ]
     if not runs:
         raise SystemExit(f"{out}: no fold judgements here yet; run without --summary first")
@@ -362,6 +375,11 @@ def main() -> None:
         help="Neighbour scans each side of a pair's scans adds on each side (model/context.py); "
         "vgmnet only: run with --models vgmnet.",
     )
+    parser.add_argument(
+        "--covisible",
+        action="store_true",
+        help="With --context: keep neighbours' points only where the pair's other scan saw.",
+    )
     parser.add_argument("--out", default=str(REPO / "build" / "seeds"))
     parser.add_argument(
         "--inputs", choices=sorted(INPUTS), default="default", help="What vgmnet reads."
@@ -383,7 +401,9 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     if not args.summary:
         _train_all(args)
-    _summary(out, args.second_look, args.inputs, args.cell, args.occlude, args.context)
+    _summary(
+        out, args.second_look, args.inputs, args.cell, args.occlude, args.context, args.covisible
+    )
 
 
 if __name__ == "__main__":

@@ -79,7 +79,7 @@ def _samples(log, count: int, context):
         est = se2.between(a.reference, b.reference)
         start = time.perf_counter()
         if context.neighbours:
-            prev, cur = mapper.points(i, j), mapper.points(j, i)
+            prev, cur = mapper.sides(i, j, est)
         else:
             prev, cur = a.points(), b.points()
         mapping += time.perf_counter() - start

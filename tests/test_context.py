@@ -13,8 +13,9 @@ import pytest
 from tests.test_cli_checks import one_line_error, run
 from vgm_studio.core import se2
 from vgm_studio.datasets import Scan
+from vgm_studio.datasets.mount import LaserMount
 from vgm_studio.errors import InputError
-from vgm_studio.model.context import Context, LocalMapper, log_poses, neighbours
+from vgm_studio.model.context import Context, LocalMapper, log_poses, neighbours, seen_by
 
 _BEAMS = 8  # a ring of beams 45° apart, each 2 m long
 
@@ -284,3 +285,81 @@ def test_a_validator_reads_edges_with_its_own_context(office_edges):
     np.testing.assert_allclose(p, validator.predict_samples(wide.samples), atol=1e-6)
     # The bundled weights judge the local maps otherwise than the scans alone.
     assert np.abs(p - validator.predict_samples(single.samples)).max() > 0.01
+
+
+def _half_ring(ranges: list[float], mount: LaserMount | None = None) -> Scan:
+    """A laser looking ahead over 180° in beams 45° apart (-90°, -45°, 0°, 45°, 90°)."""
+    r = np.array(ranges, np.float32)
+    return Scan(0, 0.0, r, -math.pi / 2, math.pi / 4, 30.0, mount=mount)
+
+
+def _at(bearing_deg: float, distance: float) -> list[float]:
+    a = math.radians(bearing_deg)
+    return [distance * math.cos(a), distance * math.sin(a)]
+
+
+def test_a_point_is_seen_inside_the_view_up_to_the_beam_and_its_margin():
+    # The beam at 0° hit a wall 2 m ahead; the one at +45° had no return (30 m max range).
+    scan = _half_ring([2.0, 2.0, 2.0, 30.0, 2.0])
+    points = np.array(
+        [
+            _at(0, 1.0),  # in front of the wall
+            _at(0, 2.2),  # behind it, within the 0.3 m margin
+            _at(0, 2.5),  # behind it, beyond the margin: the laser never saw there
+            _at(45, 20.0),  # along a beam without a return: free space to 30 m
+            _at(45, 31.0),  # beyond the laser's range
+            _at(180, 1.0),  # behind the laser, outside its 180° view
+            _at(-120, 1.0),  # outside the view: more than half a beam past the -90° one
+        ]
+    )
+    assert seen_by(scan, points, 0.3).tolist() == [True, True, False, True, False, False, False]
+    assert seen_by(scan, points, 0.6)[2]  # a wider margin takes it in
+
+
+def test_what_a_mounted_laser_saw_is_judged_in_the_laser_frame():
+    """The same beams from a laser 0.5 m ahead of the base, turned 90° and upside down: a
+    point is seen exactly where its place in the laser frame is."""
+    mount = LaserMount(x=0.5, y=0.0, yaw=math.pi / 2, flipped=True)
+    bare, mounted = (
+        _half_ring([2.0, 1.0, 2.0, 30.0, 2.0]),
+        _half_ring([2.0, 1.0, 2.0, 30.0, 2.0], mount),
+    )
+    laser = np.random.default_rng(0).uniform(-3, 3, size=(400, 2))
+    np.testing.assert_array_equal(
+        seen_by(mounted, mount.place(laser), 0.3), seen_by(bare, laser, 0.3)
+    )
+    assert 0 < seen_by(bare, laser, 0.3).sum() < len(laser)
+
+
+def test_covisible_sides_keep_the_scans_and_drop_neighbours_the_other_never_saw():
+    """Scans along +x, each seeing a ring 2 m around it: a neighbour's points the other
+    side's scan could not see (farther than 2.3 m from it) are dropped; its scan stays whole."""
+    scans = _line(40, 0.25)
+    poses = log_poses(scans)
+    plain = LocalMapper(scans, poses, Context(neighbours=2, matched=False))
+    crop = LocalMapper(scans, poses, Context(neighbours=2, matched=False, covisible=True))
+    a, b = 10, 30
+    estimate = se2.between(poses[a], poses[b])  # type: ignore[arg-type]
+    wide_a, wide_b = plain.sides(a, b, estimate)
+    np.testing.assert_array_equal(wide_a, plain.points(a, b))
+    prev, cur = crop.sides(a, b, estimate)
+    own_a, own_b = scans[a].points(), scans[b].points()
+    np.testing.assert_array_equal(prev[: len(own_a)], own_a)
+    np.testing.assert_array_equal(cur[: len(own_b)], own_b)
+    # Every neighbour point kept lies within b's view (2 m + 0.3 m of b), every one dropped
+    # outside it; b is 5 m ahead of a, so a's ring-of-2-m neighbours are partly dropped.
+    in_b = se2.transform_points(se2.inverse(estimate), wide_a[len(own_a) :])
+    near = np.hypot(in_b[:, 0], in_b[:, 1]) <= 2.3
+    assert 0 < near.sum() < len(near)
+    assert len(prev) == len(own_a) + near.sum()
+    assert len(cur) < len(wide_b)
+
+
+def test_a_checkpoint_keeps_the_covisible_crop_and_older_ones_read_without_it():
+    from vgm_studio.model.checkpoint import Checkpoint
+
+    cropped = Context(neighbours=2, covisible=True, view_margin=0.2)
+    saved = Checkpoint(model="vgmnet", context=cropped).to_dict()
+    assert Checkpoint.from_dict(saved).context == cropped
+    older = {k: v for k, v in saved["context"].items() if k not in ("covisible", "view_margin")}
+    assert Checkpoint.from_dict({**saved, "context": older}).context == Context(neighbours=2)

@@ -45,6 +45,8 @@ class ContextMeta(BaseModel):
     scans: Annotated[int, Field(ge=1, le=1_000_000)]
     matched: bool = True
     min_inliers: Annotated[Finite, Field(ge=0.0, le=1.0)] = 0.3
+    covisible: bool = False
+    view_margin: Annotated[Finite, Field(ge=0.0, le=100.0)] = 0.3
 
 
 class CheckpointMeta(BaseModel):

@@ -10,6 +10,10 @@ match holds. The poses alone are not enough: on Belgioioso's sparse log the run'
 more than 12° off on one step in ten, and a model trained on well-placed neighbours then
 rejects three right loops in four. Matched, the neighbours sit within 2 cm and 0.25° of the
 reference (median; BENCHMARKS.md, session 28), wherever the guess came from.
+
+Two local maps can reach where the other side never looked (one walked on west, the other
+east): cells filled from one side only, as a wrong match's are. ``covisible`` keeps a
+neighbour's points only where the pair's other scan saw (``seen_by``).
 """
 
 from __future__ import annotations
@@ -41,6 +45,9 @@ class Context:
             match converged with ``min_inliers`` of its points on the centre's walls; False
             places it by the poses alone.
         min_inliers: See ``matched``.
+        covisible: Keep a neighbour's points only where the pair's other scan, placed by
+            the match's estimate, saw (``seen_by``); the centre scans are kept whole.
+        view_margin: How far (m) beyond the other scan's beam a point still counts as seen.
     """
 
     neighbours: int = 0
@@ -50,6 +57,9 @@ class Context:
     scans: int = 400
     matched: bool = True
     min_inliers: float = 0.3
+    covisible: bool = False
+    # A wall's cells under the matched pose's error; from first principles, not fitted.
+    view_margin: float = 0.3
 
 
 Poses = Sequence["NDArray[np.float64] | None"] | NDArray[np.float64]
@@ -96,6 +106,28 @@ def neighbours(poses: Poses, centre: int, other: int, context: Context) -> list[
     return sorted(kept)
 
 
+def seen_by(scan: Scan, points: NDArray[np.float64], margin: float) -> NDArray[np.bool_]:
+    """Which ``points`` (in the scan's base frame) lie where the scan saw them.
+
+    A point is seen when it lies within the laser's field of view and no farther from it
+    than the beam at its bearing reached, plus ``margin``; a beam with no return saw free
+    space out to the laser's maximum range.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    mount = scan.mount
+    if mount is not None and not mount.is_base:
+        pts = se2.transform_points(se2.inverse(mount.pose), pts)
+        if mount.flipped:
+            pts = pts * np.array([1.0, -1.0])
+    bearing = np.arctan2(pts[:, 1], pts[:, 0])
+    beam = np.rint(se2.wrap_angle(bearing - scan.angle_min) / scan.angle_increment)
+    beam = np.where(beam < 0, beam + round(2 * math.pi / abs(scan.angle_increment)), beam)
+    inside = (beam >= 0) & (beam < scan.num_beams)
+    reach = np.where(scan.valid(), scan.ranges, scan.max_range).astype(np.float64)
+    idx = np.clip(beam, 0, scan.num_beams - 1).astype(np.int64)
+    return inside & (np.hypot(pts[:, 0], pts[:, 1]) <= reach[idx] + margin)
+
+
 class LocalMapper:
     """Local maps of one log's scans: each scan with its neighbours, in its own frame.
 
@@ -136,6 +168,26 @@ class LocalMapper:
                     parts.append(se2.transform_points(pose, self.scans[j].points()))
             made = self._maps[key] = np.concatenate(parts) if len(parts) > 1 else parts[0]
         return made
+
+    def sides(
+        self, a: int, b: int, estimate: Sequence[float] | NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Both sides of the pair (a, b) with ``estimate`` b's pose in a's frame: each in its
+        own scan's frame, cropped to what the other scan saw where ``covisible``."""
+        prev, cur = self.points(a, b), self.points(b, a)
+        if not self.context.covisible:
+            return prev, cur
+        pose = np.asarray(estimate, dtype=np.float64)
+        scan_a, scan_b = self.scans[a], self.scans[b]
+        na, nb = len(scan_a.points()), len(scan_b.points())  # each map starts with its scan
+        margin = self.context.view_margin
+        # a's neighbours in b's frame against b's view; b's in a's frame against a's view.
+        keep_a = seen_by(scan_b, se2.transform_points(se2.inverse(pose), prev[na:]), margin)
+        keep_b = seen_by(scan_a, se2.transform_points(pose, cur[nb:]), margin)
+        return (
+            np.concatenate([prev[:na], prev[na:][keep_a]]),
+            np.concatenate([cur[:nb], cur[nb:][keep_b]]),
+        )
 
     def placed(self, centre: int, j: int) -> NDArray[np.float64] | None:
         """Scan ``j``'s pose in ``centre``'s frame; None where its match does not hold."""

@@ -92,7 +92,7 @@ def load_samples(
             log = scans.log_for(edge).scans
             if mapper is None or mapper.scans is not log:
                 mapper = LocalMapper(log, log_poses(log), context)
-            prev, cur = mapper.points(edge.a, edge.b), mapper.points(edge.b, edge.a)
+            prev, cur = mapper.sides(edge.a, edge.b, edge.estimate)
         out.append(sample_from_scans(prev, cur, edge.estimate, edge.match))
     return out
 

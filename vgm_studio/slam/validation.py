@@ -111,7 +111,7 @@ class EdgeValidator:
                 e.p_success = float(e.kept)
         else:
             assert self.model is not None and self._rate is not None
-            p = self._rate((*self._sides(e.a, e.b), e.estimate, e.match) for e in edges)
+            p = self._rate((*self._sides(e), e.estimate, e.match) for e in edges)
             bar = self.loop_bar
             assert bar is not None  # a model gives one
             loop = np.array([e.kind == "loop" for e in edges])
@@ -123,13 +123,12 @@ class EdgeValidator:
         for e in edges:
             e.validated = e.kept
 
-    def _sides(self, a: int, b: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """The points of keyframes ``a`` and ``b`` as the model reads them."""
+    def _sides(self, edge: SlamEdge) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The points of the edge's two keyframes as the model reads them."""
         if self._maps is None:
-            return self._scans[a].points(), self._scans[b].points()
+            return self._scans[edge.a].points(), self._scans[edge.b].points()
         mapper, keyframes = self._maps
-        ka, kb = int(keyframes[a]), int(keyframes[b])
-        return mapper.points(ka, kb), mapper.points(kb, ka)
+        return mapper.sides(int(keyframes[edge.a]), int(keyframes[edge.b]), edge.estimate)
 
     @property
     def threshold(self) -> float:
