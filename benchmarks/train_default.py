@@ -26,6 +26,7 @@ CONTEXT = 0  # neighbour scans a side (``vgm-studio train --context``)
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--context", type=int, default=CONTEXT, help="train --context.")
+    parser.add_argument("--covisible", action="store_true", help="train --covisible.")
     parser.add_argument("--out", type=Path, default=OUT, help="Where the checkpoint goes.")
     args = parser.parse_args()
     out = args.out.resolve()
@@ -46,6 +47,7 @@ def main() -> None:
             "cpu",
             "--context",
             str(args.context),
+            *(["--covisible"] if args.covisible else []),
             "--out",
             str(out),
         ],

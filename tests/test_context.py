@@ -208,6 +208,8 @@ def test_a_model_trained_with_context_keeps_it_and_reads_edges_with_it(office_ed
     assert "Traceback" not in again.stderr
     bad = run("train", office_edges, "--context", "-1", "--out", tmp_path / "c.pt")
     assert "--context" in one_line_error(bad, 2)
+    alone = run("train", office_edges, "--covisible", "--out", tmp_path / "d.pt")
+    assert "--covisible" in one_line_error(alone, 2) and "--context" in one_line_error(alone, 2)
 
 
 def _context_model(folder: Path) -> Path:

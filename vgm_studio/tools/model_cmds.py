@@ -89,6 +89,13 @@ def train(
             "versions.",
         ),
     ] = 0,
+    covisible: Annotated[
+        bool,
+        typer.Option(
+            help="With --context: keep a neighbour's points only where the pair's other scan "
+            "saw (its field of view, out to each beam's range + 0.3 m)."
+        ),
+    ] = False,
     seed: Annotated[int, typer.Option(help="Seed for split, draws and weights.")] = 0,
     bn_batches: Annotated[
         int,
@@ -111,6 +118,10 @@ def train(
 
     if out.suffix != ".pt":
         raise typer.BadParameter("the checkpoint must end in .pt", param_hint="--out")
+    if covisible and not context:
+        raise typer.BadParameter(
+            "crops neighbours, so it needs --context N", param_hint="--covisible"
+        )
     if figures and not inliers and spread is False:
         raise typer.BadParameter(
             "with --no-spread too it leaves no figures to read; use --no-figures",
@@ -141,7 +152,7 @@ def train(
         init=None if init is None else str(init),
         hyper=entry(model).hyper(HyperFlags(figures, occupancy, spread, inliers, blind)),
         vgm=VGMParams(resolution=cell_size),
-        context=Context(neighbours=context),
+        context=Context(neighbours=context, covisible=covisible),
     )
     typer.echo(train_model(edges, out, config, warn=lambda line: typer.echo(line, err=True)))
 
