@@ -62,6 +62,13 @@ class LaserMount:
         pts = points * np.array([1.0, -1.0]) if self.flipped else points
         return se2.transform_points(self.pose, pts)
 
+    def unplace(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(N, 2) points in the base frame → the laser frame (``place`` undone)."""
+        if self.is_base:
+            return points
+        pts = se2.transform_points(se2.inverse(self.pose), points)
+        return pts * np.array([1.0, -1.0]) if self.flipped else pts
+
     def describe(self) -> str:
         """The mount as the options that give it: ``--laser-pose 0.2,0,180 --laser-flipped``."""
         text = f"--laser-pose {self.x:g},{self.y:g},{math.degrees(self.yaw):g}"

@@ -114,11 +114,8 @@ def seen_by(scan: Scan, points: NDArray[np.float64], margin: float) -> NDArray[n
     space out to the laser's maximum range.
     """
     pts = np.asarray(points, dtype=np.float64)
-    mount = scan.mount
-    if mount is not None and not mount.is_base:
-        pts = se2.transform_points(se2.inverse(mount.pose), pts)
-        if mount.flipped:
-            pts = pts * np.array([1.0, -1.0])
+    if scan.mount is not None:
+        pts = scan.mount.unplace(pts)
     bearing = np.arctan2(pts[:, 1], pts[:, 0])
     beam = np.rint(se2.wrap_angle(bearing - scan.angle_min) / scan.angle_increment)
     beam = np.where(beam < 0, beam + round(2 * math.pi / abs(scan.angle_increment)), beam)
