@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -65,11 +66,21 @@ class MatchResult:
         return d
 
 
-@dataclass(frozen=True)
 class _Prepared:
-    points: NDArray[np.float64]
-    voxel_map: VoxelHashMap | None
-    target: Target | None
+    """A scan's points in range, and what a match against it needs, built on first use: a
+    scan only ever matched onto another (a local map's neighbour) needs its points alone."""
+
+    def __init__(self, points: NDArray[np.float64], kiss: KissRegistration, neighbors: int):
+        self.points = points
+        self._kiss, self._neighbors = kiss, neighbors
+
+    @cached_property
+    def voxel_map(self) -> VoxelHashMap | None:
+        return self._kiss.target_map(self.points) if len(self.points) >= 3 else None
+
+    @cached_property
+    def target(self) -> Target | None:
+        return Target.build(self.points, self._neighbors) if len(self.points) >= 3 else None
 
 
 class ScanMatcher:
@@ -90,12 +101,7 @@ class ScanMatcher:
             return cached[1]
         pts = scan.points()
         pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= self.config.max_range]
-        ok = len(pts) >= 3
-        hit = _Prepared(
-            points=pts,
-            voxel_map=self._kiss.target_map(pts) if ok else None,
-            target=Target.build(pts, self.config.normal_neighbors) if ok else None,
-        )
+        hit = _Prepared(pts, self._kiss, self.config.normal_neighbors)
         self._cache[id(scan)] = (scan, hit)
         return hit
 

@@ -77,6 +77,13 @@ def neighbours(poses: Poses, centre: int, other: int, context: Context) -> list[
     A neighbour is never nearer (in the log) to ``other``, the pair's other scan, than to
     ``centre``: two sides that shared scans would agree by construction.
     """
+    return _short_of(walk(poses, centre, context), centre, other)
+
+
+def walk(poses: Poses, centre: int, context: Context) -> list[int]:
+    """The neighbours scan ``centre`` takes when no other scan of the pair is near it, in
+    order. A nearer ``other`` only stops each walk sooner, so the neighbours of any pair are
+    this list's scans nearer to ``centre`` than to ``other`` (``neighbours``)."""
     start = poses[centre]
     if context.neighbours <= 0 or start is None:
         return []
@@ -86,7 +93,7 @@ def neighbours(poses: Poses, centre: int, other: int, context: Context) -> list[
         path = 0.0
         found = 0
         for j in range(centre + step, centre + step * (context.scans + 1), step):
-            if not 0 <= j < len(poses) or abs(j - other) <= abs(j - centre):
+            if not 0 <= j < len(poses):
                 break
             pose = poses[j]
             if pose is None:
@@ -104,6 +111,10 @@ def neighbours(poses: Poses, centre: int, other: int, context: Context) -> list[
                 if found == context.neighbours:
                     break
     return sorted(kept)
+
+
+def _short_of(walked: list[int], centre: int, other: int) -> list[int]:
+    return [j for j in walked if abs(j - other) > abs(j - centre)]
 
 
 def seen_by(scan: Scan, points: NDArray[np.float64], margin: float) -> NDArray[np.bool_]:
@@ -148,13 +159,17 @@ class LocalMapper:
         self.context = context
         self._matcher = matcher
         self._placed: dict[tuple[int, int], NDArray[np.float64] | None] = {}
+        self._walks: dict[int, list[int]] = {}
         # A keyframe's map is asked for again by every loop it takes part in.
         self._maps: dict[tuple[int, tuple[int, ...]], NDArray[np.float64]] = {}
 
     def points(self, centre: int, other: int) -> NDArray[np.float64]:
         """Scan ``centre``'s points and its neighbours' (those that hold), in ``centre``'s
         frame, (N, 2); ``other`` is the pair's other scan (``neighbours``)."""
-        near = tuple(neighbours(self.poses, centre, other, self.context))
+        walked = self._walks.get(centre)
+        if walked is None:
+            walked = self._walks[centre] = walk(self.poses, centre, self.context)
+        near = tuple(_short_of(walked, centre, other))
         key = (centre, near)
         made = self._maps.get(key)
         if made is None:
