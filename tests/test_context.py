@@ -365,3 +365,48 @@ def test_a_checkpoint_keeps_the_covisible_crop_and_older_ones_read_without_it():
     assert Checkpoint.from_dict(saved).context == cropped
     older = {k: v for k, v in saved["context"].items() if k not in ("covisible", "view_margin")}
     assert Checkpoint.from_dict({**saved, "context": older}).context == Context(neighbours=2)
+
+
+def test_neighbours_placed_ahead_in_a_helper_process_are_those_placed_here(tmp_path):
+    """``PlacingAhead`` places every keyframe's neighbours in a spawned process: the mapper
+    that takes them holds, bit for bit, what it would have placed itself; a helper that dies
+    leaves the mapper placing the rest itself, with no error."""
+    import time
+
+    from vgm_studio.datasets import open_log
+    from vgm_studio.simulation.simulate import SimConfig, simulate
+    from vgm_studio.slam.placing import PlacingAhead
+
+    log = open_log(simulate(SimConfig(preset="loop", seed=2, num_beams=181, laps=0.3), tmp_path))
+    poses = np.array([s.odometry for s in log.scans])
+    keyframes = np.arange(0, len(log), 7)
+    context = Context(neighbours=2, covisible=True)
+    here = LocalMapper(log.scans, poses, context)
+    maps = [here.points(int(k), 10**6) for k in keyframes]
+    helped = LocalMapper(log.scans, poses, context)
+    ahead = PlacingAhead(helped, keyframes)
+    deadline = time.monotonic() + 60
+    while ahead._pending and time.monotonic() < deadline:
+        time.sleep(0.1)
+        ahead.collect()
+    ahead.close()
+    assert set(here._placed) <= set(helped._placed)  # all of it came from the helper
+    assert any(v is not None for v in helped._placed.values())
+    for key, pose in here._placed.items():
+        got = helped._placed[key]
+        assert (pose is None) == (got is None) and (pose is None or np.array_equal(pose, got))
+    for k, want in zip(keyframes, maps, strict=True):
+        assert np.array_equal(helped.points(int(k), 10**6), want)
+    # A helper killed before it sent anything: the mapper places every neighbour itself.
+    alone = LocalMapper(log.scans, poses, context)
+    dead = PlacingAhead(alone, keyframes)
+    assert dead._pool is not None
+    for process in dead._pool._processes.values():  # started by the first job
+        process.kill()
+    deadline = time.monotonic() + 30
+    while dead._pending and time.monotonic() < deadline:
+        time.sleep(0.1)
+        dead.collect()
+    assert not dead._pending and dead._pool is None and not alone._placed  # given up
+    for k, want in zip(keyframes, maps, strict=True):
+        assert np.array_equal(alone.points(int(k), 10**6), want)

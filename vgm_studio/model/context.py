@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from vgm_studio.core import se2
 from vgm_studio.datasets import Scan
+from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.matcher import ScanMatcher
 
 
@@ -64,6 +65,9 @@ class Context:
 
 Poses = Sequence["NDArray[np.float64] | None"] | NDArray[np.float64]
 """Each scan's pose in one frame, by index in the log (None: the log gives none)."""
+
+Placements = dict[tuple[int, int], "NDArray[np.float64] | None"]
+"""(centre, neighbour) → the neighbour's pose in the centre's frame (None: its match failed)."""
 
 
 def log_poses(scans: Sequence[Scan]) -> list[NDArray[np.float64] | None]:
@@ -158,7 +162,7 @@ class LocalMapper:
         self.poses = poses
         self.context = context
         self._matcher = matcher
-        self._placed: dict[tuple[int, int], NDArray[np.float64] | None] = {}
+        self._placed: Placements = {}
         self._walks: dict[int, list[int]] = {}
         # A keyframe's map is asked for again by every loop it takes part in.
         self._maps: dict[tuple[int, tuple[int, ...]], NDArray[np.float64]] = {}
@@ -200,6 +204,16 @@ class LocalMapper:
             np.concatenate([prev[:na], prev[na:][keep_a]]),
             np.concatenate([cur[:nb], cur[nb:][keep_b]]),
         )
+
+    @property
+    def match_config(self) -> MatchConfig:
+        """The settings each neighbour is matched with."""
+        return self._matcher.config if self._matcher is not None else MatchConfig()
+
+    def adopt(self, placements: Placements) -> None:
+        """Takes placements made elsewhere (``slam/placing.py``) by this mapper's recipe."""
+        for key, pose in placements.items():
+            self._placed.setdefault(key, pose)
 
     def placed(self, centre: int, j: int) -> NDArray[np.float64] | None:
         """Scan ``j``'s pose in ``centre``'s frame; None where its match does not hold."""

@@ -17,7 +17,7 @@ from vgm_studio.matching.candidates import select_keyframes
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.slam.config import SlamConfig
 from vgm_studio.slam.edges import SlamEdge
-from vgm_studio.slam.frontend import FrontEnd, fallback_edge, graph_edge
+from vgm_studio.slam.frontend import FrontEnd, fallback_edge, graph_edge, match_threads
 from vgm_studio.slam.odometry import scan_odometry
 from vgm_studio.slam.validation import EdgeValidator, LocalMaps, pair_judge
 
@@ -159,7 +159,8 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
         config.validation,
         scans,
         None if reference is None else reference[keyframes],
-        LocalMaps(log.scans, odometry, keyframes),
+        # A helper process where the run may use more than one core (not a one-CPU Ray task).
+        LocalMaps(log.scans, odometry, keyframes, ahead=(fe.threads or match_threads()) > 1),
     )
     t = time.perf_counter()
     front = FrontEnd(
@@ -172,7 +173,10 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
         config.consistency,
         validator.loop_bar,
     )
-    edges = front.run(progress)
+    try:
+        edges = front.run(progress)
+    finally:
+        validator.close()
     seconds["front_end"] = time.perf_counter() - t
     running = front.estimate.poses
     t = time.perf_counter()

@@ -28,6 +28,7 @@ from vgm_studio.model.registry import VALIDATOR_MODELS
 from vgm_studio.slam.config import ValidationConfig
 from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.odometry import Judge
+from vgm_studio.slam.placing import PlacingAhead
 
 if TYPE_CHECKING:
     from vgm_studio.model.validator import Validator
@@ -42,11 +43,14 @@ class LocalMaps:
         poses: (N, 3) every scan's pose from the run's odometry: which scans are a
             keyframe's neighbours, and where each neighbour's match to it starts.
         keyframes: Each keyframe's index in the log.
+        ahead: Place the keyframes' neighbours in a helper process ahead of need
+            (``slam/placing.py``): the same maps, sooner where a core is free.
     """
 
     scans: Sequence[Scan]
     poses: NDArray[np.float64]
     keyframes: NDArray[np.int64]
+    ahead: bool = False
 
 
 class EdgeValidator:
@@ -84,12 +88,15 @@ class EdgeValidator:
         self.model: Validator | None = None if self._rate is None else self._rate.model
         # Set where the model reads local maps: each keyframe's, made once.
         self._maps: tuple[LocalMapper, NDArray[np.int64]] | None = None
+        self._ahead: PlacingAhead | None = None
         if self.model is not None and self.model.context.neighbours:
             if local is None:
                 self.model.require_single_scans("this run")
             else:
                 mapper = LocalMapper(local.scans, local.poses, self.model.context)
                 self._maps = (mapper, local.keyframes)
+                if local.ahead:
+                    self._ahead = PlacingAhead(mapper, local.keyframes)
         self.precision_cut: float | None = None
         if config.loop_precision is not None:
             if self.model is None:
@@ -128,7 +135,14 @@ class EdgeValidator:
         if self._maps is None:
             return self._scans[edge.a].points(), self._scans[edge.b].points()
         mapper, keyframes = self._maps
+        if self._ahead is not None:
+            self._ahead.collect()
         return mapper.sides(int(keyframes[edge.a]), int(keyframes[edge.b]), edge.estimate)
+
+    def close(self) -> None:
+        """Stops the helper that places neighbours ahead, if any."""
+        if self._ahead is not None:
+            self._ahead.close()
 
     @property
     def threshold(self) -> float:

@@ -1,0 +1,85 @@
+"""Keyframes' neighbours placed in a second process, ahead of the front end's need for them.
+
+A model that reads local maps needs each keyframe's neighbours matched to it
+(``LocalMapper``): on Intel about 6,000 matches, 7 CPU s of Python that holds the GIL, so a
+thread would not run beside the front end. A spawned process does, on a core the front end
+leaves idle most of the time. It runs the same matches on the same inputs, so a map is the
+same whichever process placed its neighbours; a placement it has not sent yet is made here.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from collections import deque
+from collections.abc import Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vgm_studio.datasets.scans import Scan
+from vgm_studio.matching.config import MatchConfig
+from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.model.context import Context, LocalMapper, Placements, walk
+
+# Keyframes a job places: small enough that the first arrive soon, large enough that the
+# round trips cost little.
+CHUNK = 64
+
+_mapper: LocalMapper | None = None  # the helper process's own
+
+
+def _start(
+    scans: Sequence[Scan], poses: NDArray[np.float64], context: Context, config: MatchConfig
+) -> None:
+    global _mapper
+    _mapper = LocalMapper(scans, poses, context, ScanMatcher(config))
+
+
+def _place(centres: list[int]) -> Placements:
+    """Each centre's neighbours (its whole walk: what any pair may ask of it) placed."""
+    mapper = _mapper
+    assert mapper is not None  # set by _start
+    return {
+        (c, j): mapper.placed(c, j) for c in centres for j in walk(mapper.poses, c, mapper.context)
+    }
+
+
+class PlacingAhead:
+    """Places the neighbours of ``centres`` in a helper process, in their order, and hands each
+    batch to ``mapper`` once it is asked for a map and the batch is there.
+
+    Args:
+        mapper: The mapper that uses the placements.
+        centres: The scans whose local maps will be asked for, in the order they will be.
+    """
+
+    def __init__(self, mapper: LocalMapper, centres: Sequence[int] | NDArray[np.int64]) -> None:
+        self._mapper = mapper
+        self._pool: ProcessPoolExecutor | None = ProcessPoolExecutor(
+            1,
+            # Not fork: the parent runs threads (kiss-icp's, torch's) whose locks a fork copies.
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_start,
+            initargs=(mapper.scans, np.asarray(mapper.poses), mapper.context, mapper.match_config),
+        )
+        order = [int(c) for c in centres]
+        self._pending: deque[Future[Placements]] = deque(
+            self._pool.submit(_place, order[i : i + CHUNK]) for i in range(0, len(order), CHUNK)
+        )
+
+    def collect(self) -> None:
+        """Hands the mapper every batch that has arrived, in order; a helper that failed is
+        given up, and the mapper places the rest itself."""
+        while self._pending and self._pending[0].done():
+            try:
+                self._mapper.adopt(self._pending.popleft().result())
+            except Exception:  # a helper that could not start or died: nothing is lost
+                self.close()
+
+    def close(self) -> None:
+        """Stops the helper; work not done is dropped."""
+        self._pending.clear()
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
