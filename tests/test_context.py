@@ -208,8 +208,22 @@ def test_a_model_trained_with_context_keeps_it_and_reads_edges_with_it(office_ed
     assert "Traceback" not in again.stderr
     bad = run("train", office_edges, "--context", "-1", "--out", tmp_path / "c.pt")
     assert "--context" in one_line_error(bad, 2)
-    alone = run("train", office_edges, "--covisible", "--out", tmp_path / "d.pt")
+    alone = run("train", office_edges, "--context", "0", "--covisible", "--out", tmp_path / "d.pt")
     assert "--covisible" in one_line_error(alone, 2) and "--context" in one_line_error(alone, 2)
+
+
+def test_train_unasked_draws_vgmnet_as_the_bundled_model_is(office_edges, tmp_path):
+    """``train`` without --context draws vgmnet's pairs as the bundled model's recipe does, so
+    that a model trained with the defaults is one the background trainer can start from."""
+    from vgm_studio.model.checkpoint import load_checkpoint
+    from vgm_studio.model.context import DEFAULT_CONTEXT
+    from vgm_studio.model.registry import BUNDLED_MODEL
+
+    model = tmp_path / "unasked.pt"
+    trained = run("train", office_edges, "--epochs", "1", "--epoch-size", "64", "--out", model)
+    assert trained.returncode == 0, trained.stderr
+    bundled = load_checkpoint(BUNDLED_MODEL).context
+    assert load_checkpoint(model).context == DEFAULT_CONTEXT == bundled
 
 
 def _context_model(folder: Path) -> Path:

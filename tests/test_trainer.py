@@ -333,3 +333,28 @@ def test_the_guard_judges_a_model_in_use_that_reads_local_maps_on_local_maps(
     assert np.allclose(guard.p, validator.predict(worker.base.guard_edges))
     single = validator.predict_samples(worker.base.guard_samples)
     assert np.abs(guard.p - single).max() > 1e-3  # the neighbours were drawn
+
+
+def test_a_trainer_with_a_context_trains_versions_that_read_local_maps(tmp_path, edges):
+    """The background trainer draws its pairs with ``FitConfig.context`` (the bundled model's):
+    its versions say so, read the workspace's edges as local maps, and start from each other."""
+    from vgm_studio.model.features import load_samples
+    from vgm_studio.trainer.fit import MODEL
+
+    folder = tmp_path / "ws"
+    _workspace(folder, edges).close()
+    wide = Context(neighbours=2, covisible=True)
+    config = TrainerConfig(nice=0, fit=replace(FAST, epochs=2, context=wide), promotion=SMALL)
+    worker = Worker(folder, config, log=lambda _s: None)
+    assert worker.cycle(Job(from_scratch=False, request=0)) == 1
+    [v1] = registry.list_models(worker.store)
+    checkpoint = load_checkpoint(v1.path)
+    assert checkpoint.context == wide
+    single = load_samples(edges, progress=False)
+    drawn = [worker.cache.samples[e.edge_id] for e in edges]
+    grew = sum(len(w.prev) > len(s.prev) for w, s in zip(drawn, single, strict=True))
+    assert grew > len(edges) // 2
+    start = worker._warm_start()
+    assert start is not None
+    assert start.starts(MODEL, checkpoint.hyper, checkpoint.vgm, wide) is not None
+    worker.store.close()

@@ -201,16 +201,16 @@ def test_the_bundled_model_is_what_the_default_inputs_build():
     """The background trainer starts from the bundled model with ``default_hyper``'s inputs:
     a default changed without the bundled model trained again would leave every run cold."""
     from vgm_studio.model.checkpoint import load_checkpoint
-    from vgm_studio.model.context import Context
+    from vgm_studio.model.context import DEFAULT_CONTEXT
     from vgm_studio.model.registry import BUNDLED_MODEL
     from vgm_studio.trainer.fit import FitConfig
 
     config = FitConfig()
     _, hyper = build_network("vgmnet", config.hyper)
     bundled = load_checkpoint(BUNDLED_MODEL)
-    # The background trainer reads single scans, as the bundled model does.
-    assert bundled.context == Context()
-    assert bundled.starts("vgmnet", hyper, config.vgm, Context()) is not None
+    # The background trainer draws its pairs as the bundled model does.
+    assert bundled.context == config.context == DEFAULT_CONTEXT
+    assert bundled.starts("vgmnet", hyper, config.vgm, config.context) is not None
 
 
 def test_precise_batch_norm_recomputes_the_statistics_and_leaves_the_learning_alone(rows):

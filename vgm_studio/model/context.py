@@ -63,6 +63,11 @@ class Context:
     view_margin: float = 0.3
 
 
+DEFAULT_CONTEXT = Context()
+"""The bundled model's context: what ``vgm-studio train`` draws by default, and the background
+trainer always, so that a version can start from the bundled model's weights."""
+
+
 Poses = Sequence["NDArray[np.float64] | None"] | NDArray[np.float64]
 """Each scan's pose in one frame, by index in the log (None: the log gives none)."""
 

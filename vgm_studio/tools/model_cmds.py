@@ -79,23 +79,26 @@ def train(
         ),
     ] = 0.05,
     context: Annotated[
-        int,
+        int | None,
         typer.Option(
             min=0,
             max=16,
+            show_default=False,
             help="Draw each side of a pair from its scan and up to this many neighbour scans "
             "a side in the log, each matched to the scan (0: the scan alone). eval, predict "
-            "and slam read edges the same way; the background trainer trains single-scan "
-            "versions.",
+            "and slam read edges the same way. Unset: the bundled model's for vgmnet (the "
+            "background trainer's too), 0 for the others.",
         ),
-    ] = 0,
+    ] = None,
     covisible: Annotated[
-        bool,
+        bool | None,
         typer.Option(
+            show_default=False,
             help="With --context: keep a neighbour's points only where the pair's other scan "
-            "saw (its field of view, out to each beam's range + 0.3 m)."
+            "saw (its field of view, out to each beam's range + 0.3 m). Unset: as the bundled "
+            "model where it has neighbours.",
         ),
-    ] = False,
+    ] = None,
     seed: Annotated[int, typer.Option(help="Seed for split, draws and weights.")] = 0,
     bn_batches: Annotated[
         int,
@@ -111,17 +114,21 @@ def train(
     ] = None,
 ) -> None:
     """Train a validator on labelled edges (ambiguous and unlabelled ones are left out)."""
-    from vgm_studio.model.context import Context
+    from vgm_studio.model.context import DEFAULT_CONTEXT, Context
     from vgm_studio.model.training import TrainConfig
     from vgm_studio.services.models import train_model
     from vgm_studio.vgm.grid import VGMParams
 
     if out.suffix != ".pt":
         raise typer.BadParameter("the checkpoint must end in .pt", param_hint="--out")
-    if covisible and not context:
+    # Unasked, vgmnet is drawn as the bundled model is; the other models read single scans.
+    bundled = DEFAULT_CONTEXT if model == "vgmnet" else Context()
+    neighbours = bundled.neighbours if context is None else context
+    if covisible and not neighbours:
         raise typer.BadParameter(
             "crops neighbours, so it needs --context N", param_hint="--covisible"
         )
+    crop = (bundled.covisible if covisible is None else covisible) and neighbours > 0
     if figures and not inliers and spread is False:
         raise typer.BadParameter(
             "with --no-spread too it leaves no figures to read; use --no-figures",
@@ -152,7 +159,7 @@ def train(
         init=None if init is None else str(init),
         hyper=entry(model).hyper(HyperFlags(figures, occupancy, spread, inliers, blind)),
         vgm=VGMParams(resolution=cell_size),
-        context=Context(neighbours=context, covisible=covisible),
+        context=Context(neighbours=neighbours, covisible=crop),
     )
     typer.echo(train_model(edges, out, config, warn=lambda line: typer.echo(line, err=True)))
 

@@ -21,6 +21,7 @@ from vgm_studio.labels.store import LabelStore
 from vgm_studio.labels.votes import human_label
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
+from vgm_studio.model.context import Context
 from vgm_studio.model.features import PairSample, load_samples
 from vgm_studio.model.training import read_labelled, stratified_split
 
@@ -120,6 +121,7 @@ class SampleCache:
     """
 
     store: LabelStore
+    context: Context = field(default_factory=Context)
     scans: EdgeScans = field(default_factory=EdgeScans)
     samples: dict[str, PairSample] = field(default_factory=dict)
     edges: dict[str, Edge] = field(default_factory=dict)
@@ -130,7 +132,7 @@ class SampleCache:
             return
         fresh = [e for e in self.store.edges() if e.edge_id not in self.edges]
         for edge, sample in zip(
-            fresh, load_samples(fresh, self.scans, progress=False), strict=True
+            fresh, load_samples(fresh, self.scans, False, self.context), strict=True
         ):
             self.edges[edge.edge_id] = edge
             self.samples[edge.edge_id] = sample
@@ -156,10 +158,17 @@ class BaseSet:
     guard_edges: list[Edge] = field(default_factory=list)  # for a model that reads local maps
 
     @classmethod
-    def read(cls, paths: Sequence[Path], guard_fraction: float = 0.0, seed: int = 0) -> BaseSet:
+    def read(
+        cls,
+        paths: Sequence[Path],
+        guard_fraction: float = 0.0,
+        seed: int = 0,
+        context: Context | None = None,
+    ) -> BaseSet:
+        """Reads ``paths``, each pair's sides drawn with ``context`` (None: single scans)."""
         if not paths:
             return cls([], [], np.zeros(0, dtype=bool))
-        data = read_labelled(list(paths), progress=False)
+        data = read_labelled(list(paths), progress=False, context=context)
         train, guard = stratified_split(data.labels, data.groups, guard_fraction, seed)
         return cls(
             [data.edges[i].edge_id for i in train],

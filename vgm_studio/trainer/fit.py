@@ -21,7 +21,7 @@ import torch
 from numpy.typing import NDArray
 
 from vgm_studio.model.checkpoint import Checkpoint
-from vgm_studio.model.context import Context
+from vgm_studio.model.context import DEFAULT_CONTEXT, Context
 from vgm_studio.model.features import PairSample
 from vgm_studio.model.fitting import EpochHook, Recipe, Rows, fit_network
 from vgm_studio.model.operating import PrecisionCurve, precision_curve
@@ -48,6 +48,8 @@ class FitConfig:
         seed: Seeds the draws, the augmentation and fresh weights.
         hyper: ``vgmnet`` hyper-parameters (``SparseConfig`` fields).
         vgm: VGM parameters.
+        context: How each side of a pair is drawn (``model/context.py``): the bundled model's,
+            so that a version can start from it.
     """
 
     # Measured on simulated corridor loops, 25 to 300 labels (BENCHMARKS.md, background trainer):
@@ -62,6 +64,7 @@ class FitConfig:
     seed: int = 0
     hyper: dict[str, Any] = field(default_factory=lambda: default_hyper(MODEL))
     vgm: VGMParams = field(default_factory=VGMParams)
+    context: Context = DEFAULT_CONTEXT
 
     def recipe(self) -> Recipe:
         """The shared training loop's part of the config."""
@@ -109,8 +112,7 @@ def fit(
     torch.manual_seed(config.seed)
     # Built on the CPU and trained there: beside the app, the GPU, if any, is not ours to take.
     net, hyper = build_network(MODEL, config.hyper)
-    # The background trainer reads single scans (its samples carry no neighbours).
-    weights = init.starts(MODEL, hyper, config.vgm, Context()) if init is not None else None
+    weights = init.starts(MODEL, hyper, config.vgm, config.context) if init is not None else None
     warm = weights is not None
     if weights is not None:
         net.load_state_dict(weights)
@@ -136,6 +138,7 @@ def payload(result: FitResult, config: FitConfig, training: dict[str, Any]) -> C
     return Checkpoint(
         model=MODEL,
         vgm=config.vgm,
+        context=config.context,
         hyper=result.hyper,
         threshold=result.threshold,
         metrics=result.metrics,

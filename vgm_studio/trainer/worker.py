@@ -98,8 +98,9 @@ class Worker:
         self.store = open_store(workspace, url, create=False, durable=False)
         # A team store's lock lives in the database, so trainers on other hosts see it too.
         self._lock = _take_lock(self.store.workspace) if url is None else _team_lock_of(self.store)
-        self.cache = SampleCache(self.store)
-        self.base = BaseSet.read(config.base, config.held_out, config.fit.seed)
+        context = config.fit.context
+        self.cache = SampleCache(self.store, context)
+        self.base = BaseSet.read(config.base, config.held_out, config.fit.seed, context)
         self._guard_cache: tuple[str, Scored | None] | None = None
         for path in registry.remove_orphans(self.store):
             log(f"removed {path.name}: a checkpoint never registered (a trainer was stopped)")
@@ -279,11 +280,12 @@ class Worker:
         scored = None
         if path is not None and path.is_file():
             validator = Validator.load(path, device="cpu")
-            # A model in use that reads local maps is judged on the guard edges drawn so.
+            # A model in use that reads its pairs otherwise than the trainer's versions is
+            # judged on the guard edges drawn its way.
             p = (
-                validator.predict(self.base.guard_edges, batch_size=128)
-                if validator.context.neighbours
-                else validator.predict_samples(self.base.guard_samples, 128)
+                validator.predict_samples(self.base.guard_samples, 128)
+                if validator.context == self.config.fit.context
+                else validator.predict(self.base.guard_edges, batch_size=128)
             )
             scored = Scored(self.base.guard_labels, p, validator.threshold)
         self._guard_cache = (model or "", scored)
