@@ -140,3 +140,22 @@ def test_batch_cells_sorted_by_channel_with_empty_channels_left_out():
     assert value[0] == pytest.approx(grid_map([[0.01, 0.01]])[200, 200])
     none = batch_cells([])
     assert all(len(a) == 0 for a in none)
+
+
+def test_a_large_batch_built_in_parts_on_threads_equals_it_built_in_one(monkeypatch):
+    """``batch_cells`` builds a batch of many points in runs of whole clouds on threads; each
+    channel's cells and values are those of the batch built in one pass, to the bit."""
+    from vgm_studio.vgm import grid
+
+    rng = np.random.default_rng(3)
+    clouds = [rng.normal(0.0, 3.0, (int(rng.integers(0, 1200)), 2)) for _ in range(300)]
+    clouds.insert(150, np.zeros((0, 2)))
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")
+    assert len(grid._parts([np.asarray(c) for c in clouds])) == 3
+    parts = batch_cells(clouds)
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    assert len(grid._parts([np.asarray(c) for c in clouds])) == 1
+    whole = batch_cells(clouds)
+    assert len(whole[0]) > 100_000
+    for got, want in zip(parts, whole, strict=True):
+        assert got.dtype == want.dtype and np.array_equal(got, want)

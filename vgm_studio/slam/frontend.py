@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
@@ -25,6 +24,7 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from vgm_studio.core import se2
+from vgm_studio.core.cpus import usable_threads
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.graph.config import GraphConfig
 from vgm_studio.graph.pose_graph import GraphEdge, RunningEstimate, edge_covariance
@@ -93,12 +93,8 @@ def narrow_odometry(graph: GraphConfig, front_end: FrontEndConfig) -> GraphConfi
 
 
 def match_threads() -> int:
-    """Threads for loop matching: ``OMP_NUM_THREADS`` where set (a Ray worker holding one
-    CPU gets 1), else the CPUs this process may run on, at most 4."""
-    named = os.environ.get("OMP_NUM_THREADS", "")
-    if named.isdigit() and int(named) > 0:
-        return int(named)
-    return max(1, min(4, len(os.sched_getaffinity(0))))
+    """Threads for loop matching (``core.cpus.usable_threads``)."""
+    return usable_threads()
 
 
 def false_loop_pairs(odometry: NDArray[np.float64], config: FrontEndConfig) -> dict[int, list[int]]:

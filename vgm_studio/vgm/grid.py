@@ -8,13 +8,16 @@ exp(−½ (c−μ)ᵀ Σ⁻¹ (c−μ)) · n / n_max, c being the cell centre an
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vgm_studio.core import se2
+from vgm_studio.core.cpus import usable_threads
 
 DEFAULT_SIZE = 400
 DEFAULT_RESOLUTION = 0.05
@@ -76,6 +79,45 @@ def batch_cells(
         index i·size + j and its value; sorted by channel, then cell.
     """
     arrays = [np.asarray(c, dtype=np.float64).reshape(-1, 2) for c in clouds]
+    parts = _parts(arrays)
+    if len(parts) == 1:
+        return _cells(arrays, size, resolution, sigma)
+    # numpy's sorts and sums let go of the GIL: a large batch is built in parts at once, and
+    # each channel's values do not depend on the others'.
+    built = list(_pool().map(lambda p: _cells(arrays[p[0] : p[1]], size, resolution, sigma), parts))
+    return (
+        np.concatenate([ch + start for (start, _), (ch, _, _) in zip(parts, built, strict=True)]),
+        np.concatenate([cell for _, cell, _ in built]),
+        np.concatenate([value for _, _, value in built]),
+    )
+
+
+# Points a part of a batch holds at least: below it the threads' overhead outweighs the gain.
+_PART_POINTS = 50_000
+_POOLS: dict[int, ThreadPoolExecutor] = {}
+
+
+def _parts(arrays: Sequence[NDArray[np.float64]]) -> list[tuple[int, int]]:
+    """Runs of whole clouds, as many as the usable threads and about equal in points."""
+    total = sum(len(a) for a in arrays)
+    count = min(usable_threads(), total // _PART_POINTS, len(arrays))
+    if count <= 1:
+        return [(0, len(arrays))]
+    ends = np.searchsorted(np.cumsum([len(a) for a in arrays]), total * np.arange(1, count) / count)
+    bounds = [0, *sorted({int(e) + 1 for e in ends if 0 <= e < len(arrays) - 1}), len(arrays)]
+    return list(itertools.pairwise(bounds))
+
+
+def _pool() -> ThreadPoolExecutor:
+    threads = usable_threads()
+    if threads not in _POOLS:
+        _POOLS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="vgm")
+    return _POOLS[threads]
+
+
+def _cells(
+    arrays: Sequence[NDArray[np.float64]], size: int, resolution: float, sigma: float
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float32]]:
     pts = np.concatenate(arrays) if arrays else np.zeros((0, 2))
     owner = np.repeat(np.arange(len(arrays), dtype=np.int64), [len(a) for a in arrays])
     half = 0.5 * size * resolution
