@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from vgm_studio.model.checkpoint import load_checkpoint, save_checkpoint
@@ -105,7 +106,7 @@ def test_the_loop_bar_is_the_highest_cut_a_loop_must_pass(tmp_path):
     """``EdgeValidator.loop_bar`` is what a wide sequential retry must reach too: the
     highest of the checkpoint's threshold, ``--loop-threshold`` and the precision cut."""
     from vgm_studio.slam.config import ValidationConfig
-    from vgm_studio.slam.validation import EdgeValidator
+    from vgm_studio.slam.validation import EdgeValidator, LocalMaps
 
     curve = PrecisionCurve([0.0, 2.0], [0.5, 1.0], [1.0, 0.0])
     model = _with_curve(tmp_path / "curve.pt", curve)
@@ -113,7 +114,9 @@ def test_the_loop_bar_is_the_highest_cut_a_loop_must_pass(tmp_path):
 
     def bar(threshold: float | None, precision: float | None = None) -> float | None:
         config = ValidationConfig(model=model, loop_threshold=threshold, loop_precision=precision)
-        return EdgeValidator(config, [], None).loop_bar
+        # No scans to read: the bundled weights' context needs somewhere to find neighbours.
+        nowhere = LocalMaps([], np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
+        return EdgeValidator(config, [], None, nowhere).loop_bar
 
     assert bar(0.8) == max(own, 0.8)
     assert bar(None) == own

@@ -16,7 +16,7 @@ from vgm_studio.model.registry import BUNDLED_MODEL
 from vgm_studio.simulation.simulate import SimConfig, simulate
 from vgm_studio.slam.config import ValidationConfig
 from vgm_studio.slam.edges import SlamEdge
-from vgm_studio.slam.validation import EdgeValidator
+from vgm_studio.slam.validation import EdgeValidator, LocalMaps
 from vgm_studio.tools import cmd
 
 
@@ -30,8 +30,12 @@ def test_the_slam_validator_looks_again_only_at_the_edges_it_is_unsure_of(office
     """Matches slid by 0–0.5 m along x, so that the bundled model is sure of some and
     unsure of others: with ``second_look`` 4 the sure ones keep their p(success) to the bit
     and every unsure one moves."""
-    scans = open_log(office).scans[::4][:40]
+    log = open_log(office).scans
+    keyframes = np.arange(0, len(log), 4)[:40]
+    scans = [log[i] for i in keyframes]
     truth = np.array([s.reference for s in scans])
+    # The bundled model reads local maps: each keyframe's neighbours placed from the truth.
+    local = LocalMaps(log, np.array([s.reference for s in log]), keyframes)
     matcher = ScanMatcher()
     edges = []
     for k, slide in zip(range(1, len(scans)), np.linspace(0.0, 0.5, len(scans) - 1), strict=True):
@@ -44,7 +48,7 @@ def test_the_slam_validator_looks_again_only_at_the_edges_it_is_unsure_of(office
     for turns in (1, 4):
         config = ValidationConfig(model=BUNDLED_MODEL, second_look=turns)
         judged = [dataclasses.replace(e) for e in edges]
-        EdgeValidator(config, scans)(judged)
+        EdgeValidator(config, scans, local=local)(judged)
         p[turns] = np.array([e.p_success for e in judged])
     unsure = (p[1] > 0.02) & (p[1] < 0.98)
     assert 0 < unsure.sum() < len(edges), p[1]

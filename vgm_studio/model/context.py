@@ -63,9 +63,11 @@ class Context:
     view_margin: float = 0.3
 
 
-DEFAULT_CONTEXT = Context()
+DEFAULT_CONTEXT = Context(neighbours=2, covisible=True)
 """The bundled model's context: what ``vgm-studio train`` draws by default, and the background
-trainer always, so that a version can start from the bundled model's weights."""
+trainer always, so that a version can start from the bundled model's weights. Two neighbours a
+side, cropped to what the other side saw: ahead of single scans on the leave-one-building-out
+table in two draws (BENCHMARKS.md, sessions 28–30)."""
 
 
 Poses = Sequence["NDArray[np.float64] | None"] | NDArray[np.float64]
