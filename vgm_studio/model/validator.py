@@ -321,7 +321,7 @@ class Validator:
                 self.path,
                 f"reads each scan with {self.context.neighbours} neighbours a side "
                 f"(trained with --context); {user} gives single scans: use a model trained "
-                "without --context",
+                "with --context 0",
             )
 
     def threshold_at_precision(self, precision: float) -> float:
