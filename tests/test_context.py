@@ -424,3 +424,54 @@ def test_neighbours_placed_ahead_in_a_helper_process_are_those_placed_here(tmp_p
     assert not dead._pending and dead._pool is None and not alone._placed  # given up
     for k, want in zip(keyframes, maps, strict=True):
         assert np.array_equal(alone.points(int(k), 10**6), want)
+
+
+_PARENT = """
+import sys, time
+import numpy as np
+from vgm_studio.datasets import open_log
+from vgm_studio.model.context import Context, LocalMapper
+from vgm_studio.slam.placing import PlacingAhead
+
+log = open_log(sys.argv[1])
+poses = np.array([s.odometry for s in log.scans])
+mapper = LocalMapper(log.scans, poses, Context(neighbours=2))
+ahead = PlacingAhead(mapper, np.arange(len(log)))
+print(*ahead._pool._processes, flush=True)
+time.sleep(600)
+"""
+
+
+def test_a_helper_whose_parent_is_killed_outright_goes_too(tmp_path):
+    """kill -9 closes no pipe the helper waits on, so the helper watches its parent and goes
+    when it does: no orphan left placing neighbours for nobody."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from vgm_studio.simulation.simulate import SimConfig, simulate
+
+    log = simulate(SimConfig(preset="loop", seed=2, num_beams=181, laps=0.3), tmp_path)
+    parent = subprocess.Popen(
+        [sys.executable, "-c", _PARENT, str(log)], stdout=subprocess.PIPE, text=True
+    )
+    assert parent.stdout is not None
+    [helper] = map(int, parent.stdout.readline().split())
+    os.kill(helper, 0)  # alive
+    parent.send_signal(signal.SIGKILL)
+    parent.wait()
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline:
+        try:
+            os.kill(helper, 0)
+        except ProcessLookupError:
+            return
+        # A helper that went is a zombie until someone reaps it: it has no parent now but init.
+        with open(f"/proc/{helper}/stat") as stat:
+            if stat.read().split(")")[-1].split()[0] == "Z":
+                return
+        time.sleep(0.2)
+    os.kill(helper, signal.SIGKILL)
+    raise AssertionError("the helper outlived its parent by 20 s")

@@ -10,6 +10,9 @@ same whichever process placed its neighbours; a placement it has not sent yet is
 from __future__ import annotations
 
 import multiprocessing
+import os
+import threading
+import time
 from collections import deque
 from collections.abc import Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -34,6 +37,15 @@ def _start(
 ) -> None:
     global _mapper
     _mapper = LocalMapper(scans, poses, context, ScanMatcher(config))
+    # A parent killed outright (kill -9) closes no pipe the helper waits on: it would wait on.
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(0)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
 
 
 def _place(centres: list[int]) -> Placements:
