@@ -381,7 +381,7 @@ def test_a_checkpoint_keeps_the_covisible_crop_and_older_ones_read_without_it():
     assert Checkpoint.from_dict({**saved, "context": older}).context == Context(neighbours=2)
 
 
-def test_neighbours_placed_ahead_in_a_helper_process_are_those_placed_here(tmp_path):
+def test_neighbours_placed_ahead_in_a_helper_process_are_those_placed_here(tmp_path, monkeypatch):
     """``PlacingAhead`` places every keyframe's neighbours in a spawned process: the mapper
     that takes them holds, bit for bit, what it would have placed itself; a helper that dies
     leaves the mapper placing the rest itself, with no error."""
@@ -424,6 +424,18 @@ def test_neighbours_placed_ahead_in_a_helper_process_are_those_placed_here(tmp_p
     assert not dead._pending and dead._pool is None and not alone._placed  # given up
     for k, want in zip(keyframes, maps, strict=True):
         assert np.array_equal(alone.points(int(k), 10**6), want)
+    # Where no process can be started at all, there is no helper and no error either.
+    import multiprocessing
+
+    def no_processes(_method: str) -> None:
+        raise OSError("no /dev/shm")
+
+    monkeypatch.setattr(multiprocessing, "get_context", no_processes)
+    bare = LocalMapper(log.scans, poses, context)
+    none = PlacingAhead(bare, keyframes)
+    none.collect()
+    assert none._pool is None and not none._pending
+    assert np.array_equal(bare.points(int(keyframes[0]), 10**6), maps[0])
 
 
 _PARENT = """

@@ -68,17 +68,27 @@ class PlacingAhead:
 
     def __init__(self, mapper: LocalMapper, centres: Sequence[int] | NDArray[np.int64]) -> None:
         self._mapper = mapper
-        self._pool: ProcessPoolExecutor | None = ProcessPoolExecutor(
-            1,
-            # Not fork: the parent runs threads (kiss-icp's, torch's) whose locks a fork copies.
-            mp_context=multiprocessing.get_context("spawn"),
-            initializer=_start,
-            initargs=(mapper.scans, np.asarray(mapper.poses), mapper.context, mapper.match_config),
-        )
+        self._pool: ProcessPoolExecutor | None = None
+        self._pending: deque[Future[Placements]] = deque()
         order = [int(c) for c in centres]
-        self._pending: deque[Future[Placements]] = deque(
-            self._pool.submit(_place, order[i : i + CHUNK]) for i in range(0, len(order), CHUNK)
-        )
+        try:
+            self._pool = ProcessPoolExecutor(
+                1,
+                # Not fork: the parent runs threads (kiss-icp's, torch's) whose locks a fork
+                # would copy held.
+                mp_context=multiprocessing.get_context("spawn"),
+                initializer=_start,
+                initargs=(
+                    mapper.scans,
+                    np.asarray(mapper.poses),
+                    mapper.context,
+                    mapper.match_config,
+                ),
+            )
+            for i in range(0, len(order), CHUNK):
+                self._pending.append(self._pool.submit(_place, order[i : i + CHUNK]))
+        except (OSError, RuntimeError):  # no processes here (no /dev/shm, a sandbox): no help
+            self.close()
 
     def collect(self) -> None:
         """Hands the mapper every batch that has arrived, in order; a helper that failed is
