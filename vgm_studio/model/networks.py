@@ -328,14 +328,20 @@ def _sparse_block(
     out = base.permute(0, 2, 3, 1).repeat(batch, 1, 1, 1).view(-1, channels)  # one copy
     pair, position = rows // (side * side), rows % (side * side)
     i, j = position // side, position % side
-    targets, terms = [], []
+    # Where each row tap and each column tap lands (and whether it does), worked out once
+    # each instead of once per kernel tap: a 3×3 kernel's nine taps share three of each.
+    down, across = [], []
     for ki in range(kh):
         ti = i + ph - ki  # stride × output row, when the tap lands on one
-        for kj in range(kw):
-            tj = j + pw - kj
-            ok = (ti % sh == 0) & (ti >= 0) & (ti < sh * oh) & (tj % sw == 0) & (tj >= 0)
-            ok &= tj < sw * ow
-            targets.append((pair[ok] * oh + ti[ok] // sh) * ow + tj[ok] // sw)
+        down.append(((ti % sh == 0) & (ti >= 0) & (ti < sh * oh), pair * oh + ti // sh))
+    for kj in range(kw):
+        tj = j + pw - kj
+        across.append(((tj % sw == 0) & (tj >= 0) & (tj < sw * ow), tj // sw))
+    targets, terms = [], []
+    for ki, (row_ok, row) in enumerate(down):
+        for kj, (col_ok, col) in enumerate(across):
+            ok = row_ok & col_ok
+            targets.append(row[ok] * ow + col[ok])
             terms.append(delta[ok] @ conv.weight[:, :, ki, kj].T)
     target, term = torch.cat(targets), torch.cat(terms)
     if torch.is_grad_enabled() and term.requires_grad:
