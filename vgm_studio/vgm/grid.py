@@ -119,19 +119,24 @@ def _cells(
     arrays: Sequence[NDArray[np.float64]], size: int, resolution: float, sigma: float
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float32]]:
     pts = np.concatenate(arrays) if arrays else np.zeros((0, 2))
-    owner = np.repeat(np.arange(len(arrays), dtype=np.int64), [len(a) for a in arrays])
+    # 32-bit keys where they fit (a batch of up to 13,000 clouds on 400² cells) sort faster.
+    kind = np.int32 if len(arrays) * size * size < 2**31 else np.int64
+    owner = np.repeat(np.arange(len(arrays), dtype=kind), [len(a) for a in arrays])
     half = 0.5 * size * resolution
     ij = np.floor((pts + half) / resolution)
-    inside = np.all((ij >= 0) & (ij < size), axis=1)
+    col, row = ij[:, 0], ij[:, 1]
+    inside = (col >= 0) & (col < size) & (row >= 0) & (row < size)
     if not inside.any():
         empty = np.zeros(0, dtype=np.int64)
         return empty, empty.copy(), np.zeros(0, dtype=np.float32)
-    ij = ij[inside].astype(np.int64)
+    if not inside.all():  # most batches lie wholly on the grid: no copies then
+        pts, owner, ij = pts[inside], owner[inside], ij[inside]
+    ij = ij.astype(kind)
     # Work in offsets from each point's cell centre: small numbers, so the moments stay exact.
-    d = pts[inside] - ((ij + 0.5) * resolution - half)
-    key = (owner[inside] * size + ij[:, 1]) * size + ij[:, 0]
+    d = pts - ((ij + 0.5) * resolution - half)
+    key = (owner * size + ij[:, 1]) * size + ij[:, 0]
     key, inv, n = np.unique(key, return_inverse=True, return_counts=True)
-    channel, cell = np.divmod(key, size * size)
+    channel, cell = np.divmod(key.astype(np.int64), size * size)
     dx, dy = d[:, 0], d[:, 1]
     mx = np.bincount(inv, dx) / n
     my = np.bincount(inv, dy) / n
