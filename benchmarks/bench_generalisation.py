@@ -13,9 +13,14 @@ The table ends with the paired comparison of ``vgmnet`` and ``rgb-baseline`` per
 the loops only one of them judged right, and the exact McNemar p of that split, so a lead of
 one or two loops on a small building reads as what it is.
 
+``vgmnet``'s fold models draw each side of a pair as the bundled model does (its local maps,
+``model.context.DEFAULT_CONTEXT``); the other models read single scans. The edges are read
+once per way of drawing them.
+
 Fold models already in build/edges/folds are used again (a stopped run goes on with the next
-one; ``--retrain`` trains them all again). A ``vgmnet`` fold on cells other than 5 cm has
-its grid in the file name (``intel-vgmnet-cell0.1.pt``), so both grids' folds are kept.
+one; ``--retrain`` trains them all again); one drawn another way is trained again. A
+``vgmnet`` fold on cells other than 5 cm has its grid in the file name
+(``intel-vgmnet-cell0.1.pt``), so both grids' folds are kept.
 
 Run: python benchmarks/bench_generalisation.py [--models vgmnet,score] [--buildings orebro]
      [--epochs 12] [--epoch-size 6000] [--max-train N] [--retrain] [--second-look 4]
@@ -76,11 +81,14 @@ def fold_config(
     given), the inputs ``vgm-studio train``'s switches ``inputs`` give (None: the bundled
     default's), ``vgmnet`` on ``cell`` metre cells (None: the paper's); ``overrides`` set any
     other ``TrainConfig`` field."""
+    from vgm_studio.model.context import DEFAULT_CONTEXT, Context
     from vgm_studio.model.registry import HyperFlags, entry
     from vgm_studio.model.training import TrainConfig
     from vgm_studio.vgm.grid import VGMParams
 
     recipe_epochs, recipe_size = _recipe(model)
+    # vgmnet's pairs drawn as the bundled model's are (local maps); the others single scans.
+    overrides.setdefault("context", DEFAULT_CONTEXT if model == "vgmnet" else Context())
     return TrainConfig(
         model=model,
         epochs=epochs or recipe_epochs,
@@ -181,16 +189,15 @@ def _row(building: str, model: str, labels, probs, checkpoint, seconds: float) -
 
 
 def _fold_rows(
-    fold, data, origin: list[str], models: list[str], args, right: Judged
+    fold, read: dict, origin: list[str], models: list[str], args, right: Judged
 ) -> list[list[str]]:
     """Trains each model on the fold's training files and tests it on the held-out loops;
-    ``right`` gets, per (building, model), which test pairs the model judged right."""
+    ``read`` holds the edges read with each context the models draw with; ``right`` gets,
+    per (building, model), which test pairs the model judged right."""
     from vgm_studio.model.checkpoint import load_checkpoint
     from vgm_studio.model.training import train
     from vgm_studio.model.validator import SecondLook, Validator
 
-    test = subset(data, origin, [fold.test])
-    training = subset(data, origin, fold.train)
     rows = []
     for model in models:
         out = BUILD / "folds" / f"{fold.held_out}-{model}{grid_tag(model, args.cell)}.pt"
@@ -198,9 +205,13 @@ def _fold_rows(
         config = fold_config(
             model, args.epochs, args.epoch_size, args.cell, max_train=args.max_train, device="cpu"
         )
+        data = read[config.context]
+        test = subset(data, origin, [fold.test])
+        training = subset(data, origin, fold.train)
         kept = load_checkpoint(out) if out.exists() else None
-        # A fold model on other VGMs (another --cell) is trained again, not reused.
-        if args.retrain or kept is None or kept.vgm != config.vgm:
+        # A fold model on other VGMs (another --cell) or other sides (another recipe's local
+        # maps) is trained again, not reused.
+        if args.retrain or kept is None or (kept.vgm, kept.context) != (config.vgm, config.context):
             train(training, config, out, progress=False, log=lambda _line: None)
         elif "calibration_edges" not in kept.training:
             print(recalibrate(out, training), flush=True)  # trained before the rule
@@ -264,11 +275,14 @@ def main() -> None:
     except ValueError as exc:
         raise SystemExit(f"--buildings: {exc}") from None
     files = sorted({p for f in folds for p in f.train} | {f.test for f in folds})
-    data = read_labelled(files, progress=False)
+    # Each context the models draw their pairs with, read once (local maps take minutes).
+    contexts = {fold_config(m).context for m in models}
+    read = {c: read_labelled(files, progress=False, context=c) for c in contexts}
+    data = next(iter(read.values()))
     # Which file each edge came from: read_labelled keeps the files' order and each file's.
     origin = [f["path"] for f in data.files for _ in range(f["used"])]
     right: Judged = {}
-    rows = [row for fold in folds for row in _fold_rows(fold, data, origin, models, args, right)]
+    rows = [row for fold in folds for row in _fold_rows(fold, read, origin, models, args, right)]
     print(
         "\n# leave-one-building-out, loops of each held-out building; epochs × draws per fold "
         + ", ".join(
@@ -278,6 +292,7 @@ def main() -> None:
         )
         + (f", at most {args.max_train} training edges" if args.max_train else "")
         + (f"; vgmnet on {args.cell:g} m cells" if "vgmnet" in models else "")
+        + (f", its pairs drawn with {fold_config('vgmnet').context}" if "vgmnet" in models else "")
         + (f"; a second look over {args.second_look} turns" if args.second_look > 1 else "")
         + "; 2 CPU cores"
     )
