@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from vgm_studio.core.cpus import usable_threads
 from vgm_studio.graph.config import GraphConfig
 from vgm_studio.maps.config import MapConfig
 from vgm_studio.matching.reference_labels import LabelThresholds
@@ -163,6 +164,11 @@ class FrontEndConfig:
     false_loop_distance: float = 5.0
     seed: int = 0
     threads: int = 0
+
+    def match_threads(self) -> int:
+        """``threads``, or where it is 0 the threads this process may use
+        (``core.cpus.usable_threads``)."""
+        return self.threads or usable_threads()
 
 
 @dataclass(frozen=True)

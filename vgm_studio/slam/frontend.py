@@ -24,7 +24,6 @@ from numpy.typing import NDArray
 from tqdm import tqdm
 
 from vgm_studio.core import se2
-from vgm_studio.core.cpus import usable_threads
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.graph.config import GraphConfig
 from vgm_studio.graph.pose_graph import GraphEdge, RunningEstimate, edge_covariance
@@ -90,11 +89,6 @@ def narrow_odometry(graph: GraphConfig, front_end: FrontEndConfig) -> GraphConfi
         odometry_sigma_xy=front_end.drift_odometry_sigma_xy,
         odometry_sigma_theta_deg=front_end.drift_odometry_sigma_theta_deg,
     )
-
-
-def match_threads() -> int:
-    """Threads for loop matching (``core.cpus.usable_threads``)."""
-    return usable_threads()
 
 
 def false_loop_pairs(odometry: NDArray[np.float64], config: FrontEndConfig) -> dict[int, list[int]]:
@@ -167,7 +161,7 @@ class FrontEnd:
         self._sequential_matcher = SequentialMatcher(
             scans, odometry, matcher, self.loop_matcher, config
         )
-        self._threads = config.threads or match_threads()
+        self._threads = config.match_threads()
         self._pool: ThreadPoolExecutor | None = None
         self.estimate = RunningEstimate(odometry[0], graph)
         self.edges: list[SlamEdge] = []

@@ -17,7 +17,7 @@ from vgm_studio.matching.candidates import select_keyframes
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.slam.config import SlamConfig
 from vgm_studio.slam.edges import SlamEdge
-from vgm_studio.slam.frontend import FrontEnd, fallback_edge, graph_edge, match_threads
+from vgm_studio.slam.frontend import FrontEnd, fallback_edge, graph_edge
 from vgm_studio.slam.odometry import scan_odometry
 from vgm_studio.slam.validation import EdgeValidator, LocalMaps, pair_judge
 
@@ -160,7 +160,7 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
         scans,
         None if reference is None else reference[keyframes],
         # A helper process where the run may use more than one core (not a one-CPU Ray task).
-        LocalMaps(log.scans, odometry, keyframes, ahead=(fe.threads or match_threads()) > 1),
+        LocalMaps(log.scans, odometry, keyframes, ahead=fe.match_threads() > 1),
     )
     t = time.perf_counter()
     front = FrontEnd(

@@ -121,7 +121,7 @@ class SampleCache:
     """
 
     store: LabelStore
-    context: Context = field(default_factory=Context)
+    context: Context  # how each side is drawn: the trainer's (``FitConfig.context``)
     scans: EdgeScans = field(default_factory=EdgeScans)
     samples: dict[str, PairSample] = field(default_factory=dict)
     edges: dict[str, Edge] = field(default_factory=dict)
