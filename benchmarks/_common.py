@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import platform
 import statistics
+import threading
 import time
 from collections.abc import Callable
 from datetime import date
@@ -31,6 +32,20 @@ def pin_to_cores(count: int) -> None:
     os.sched_setaffinity(0, cores)
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = str(count)
+
+
+def watch_parent() -> None:
+    """Ends this process once the process that spawned it is gone: a killed run would
+    otherwise leave its spawned workers training on, each on a core, with no one to take
+    their results."""
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True).start()
 
 
 def machine() -> str:

@@ -22,16 +22,14 @@ import argparse
 import itertools
 import json
 import multiprocessing
-import os
 import sys
-import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import REPO, machine, table
+from _common import REPO, machine, table, watch_parent
 from bench_generalisation import buildings, fold_config, grid_tag, subset
 from folds import Fold, make_folds
 from numpy.typing import NDArray
@@ -174,16 +172,8 @@ def _job(job: tuple[str, str, int]) -> str:
 
 
 def _worker(args: argparse.Namespace) -> None:
-    """A pool worker's start: it ends when the run that spawned it does. A killed parent
-    leaves spawned workers training on, each on a core, with no one to take their results."""
-    parent = os.getppid()
-
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(5)
-        os._exit(1)
-
-    threading.Thread(target=watch, daemon=True).start()
+    """A pool worker's start: it ends when the run that spawned it does."""
+    watch_parent()
     _load(args)
 
 
