@@ -268,28 +268,31 @@ def _judge_all(folds, read: dict, origin: list[str], models: list[str], args, ri
         return rows
     import multiprocessing
     import pickle
-    import tempfile
 
-    # The slowest jobs first, so the last to finish are short: the RGB baseline's folds,
-    # then vgmnet's on the largest training sets (the smallest buildings held out).
+    # Model by model (MODELS' order), each model's folds on the largest training sets (the
+    # smallest buildings held out) first, so the last jobs to finish are short: score's.
     size = {f.held_out: sum(p.stat().st_size for p in f.train) for f in folds}
     jobs = sorted(
         ((f.held_out, m) for f in folds for m in models),
         key=lambda j: (MODELS.index(j[1]), -size[j[0]]),
     )
     done: dict[tuple[str, str], list[str]] = {}
-    with tempfile.NamedTemporaryFile(dir=BUILD, suffix=".pickle") as store:
-        pickle.dump({"read": read, "origin": origin}, store, protocol=pickle.HIGHEST_PROTOCOL)
-        store.flush()
+    # One name, not a fresh temporary file: a run killed outright leaves its edges (most of
+    # a gigabyte) for the next run to write over, not beside.
+    store = BUILD / "lobo-reading.pickle"
+    try:
+        with store.open("wb") as f:
+            pickle.dump({"read": read, "origin": origin}, f, protocol=pickle.HIGHEST_PROTOCOL)
         spawn = multiprocessing.get_context("spawn")
-        init = (args, Path(store.name), folds)
-        with spawn.Pool(args.jobs, _start_worker, init) as pool:
+        with spawn.Pool(args.jobs, _start_worker, (args, store, folds)) as pool:
             for building, model, row, mine in pool.imap_unordered(_pool_job, jobs):
                 done[building, model] = row
                 right[building, model] = mine
                 print(" | ".join(row), flush=True)
             pool.close()  # every job is done: let the workers end rather than be terminated
             pool.join()
+    finally:
+        store.unlink(missing_ok=True)
     # The paired comparison reads the buildings in fold order, not in the order they ended.
     ordered = {(f.held_out, m): right.pop((f.held_out, m)) for f in folds for m in models}
     right.update(ordered)

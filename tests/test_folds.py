@@ -91,3 +91,18 @@ def test_paired_table_says_which_leads_chance_can_explain(monkeypatch, capsys):
     assert "level" in rows["even"] and "1.000" in rows["even"]
     assert "rgb-baseline (chance can explain it)" in rows["small"]
     assert "score-only" not in rows
+
+
+def test_epochs_per_model_or_for_all(monkeypatch):
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "benchmarks"))
+    import argparse
+
+    import bench_generalisation
+
+    parse = bench_generalisation._epochs
+    assert parse("vgmnet=12,rgb-baseline=4") == {"vgmnet": 12, "rgb-baseline": 4}
+    # One number is every model's; a model left out keeps its recipe (dict.get -> None).
+    assert parse("12") == dict.fromkeys(bench_generalisation.MODELS, 12)
+    for bad, why in [("vgmnet=x", "not a number"), ("resnet=3", "unknown model"), ("0", "1 or")]:
+        with pytest.raises(argparse.ArgumentTypeError, match=why):
+            parse(bad)
