@@ -401,10 +401,11 @@ def main() -> None:
 def _epochs(text: str) -> dict[str, int]:
     """``--epochs``: ``12`` for every network, or ``vgmnet=12,rgb-baseline=4``."""
     try:
-        if "=" not in text:
-            return dict.fromkeys(MODELS, int(text))
-        pairs = dict(part.split("=", 1) for part in text.split(",") if part)
-        epochs = {model: int(n) for model, n in pairs.items()}
+        if "=" in text:
+            pairs = dict(part.split("=", 1) for part in text.split(",") if part)
+            epochs = {model: int(n) for model, n in pairs.items()}
+        else:
+            epochs = dict.fromkeys(MODELS, int(text))
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number of epochs: {text!r}") from None
     unknown = sorted(set(epochs) - set(MODELS))
