@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import platform
 import statistics
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from datetime import date
 from pathlib import Path
+from typing import Any, TypeVar
+
+Job = TypeVar("Job")
+Result = TypeVar("Result")
 
 # On a CPU the RGB baseline (2 ms a pair) trains fewer, smaller epochs than TrainConfig's
 # defaults: (epochs, draws per epoch). Its tables' last columns say so.
@@ -46,6 +51,22 @@ def watch_parent() -> None:
         os._exit(1)
 
     threading.Thread(target=watch, daemon=True).start()
+
+
+def spawned(
+    job: Callable[[Job], Result],
+    jobs: Iterable[Job],
+    processes: int,
+    start: Callable[..., None],
+    start_args: tuple[Any, ...],
+) -> Iterator[Result]:
+    """``job``'s results as they end, run by ``processes`` spawned workers, each begun with
+    ``start(*start_args)``. Spawned, not forked: a pool forked after the parent had loaded
+    the edges hung before its first job on a 16-core GPU machine (cause not traced)."""
+    with multiprocessing.get_context("spawn").Pool(processes, start, start_args) as pool:
+        yield from pool.imap_unordered(job, jobs)
+        pool.close()  # every job is done: let the workers end rather than be terminated
+        pool.join()
 
 
 def machine() -> str:

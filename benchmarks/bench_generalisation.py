@@ -46,7 +46,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from _common import RGB_CPU_RECIPE, datasets_dir, machine, pin_to_cores, table, watch_parent
+from _common import (
+    RGB_CPU_RECIPE,
+    datasets_dir,
+    machine,
+    pin_to_cores,
+    spawned,
+    table,
+    watch_parent,
+)
 from edge_sets import BUILD, training_edges
 from folds import Building, make_folds
 from numpy.typing import NDArray
@@ -255,20 +263,21 @@ def _pool_job(job: tuple[str, str]) -> tuple[str, str, list[str], Any]:
     return building, model, row, right
 
 
-def _judge_all(folds, read: dict, origin: list[str], models: list[str], args, right: Judged):
-    """Every fold's rows, in fold order; ``args.jobs`` at once in spawned processes, which
-    load the edges the parent read (a pickle in build/) rather than read them again."""
-    if args.jobs == 1:
-        rows = []
-        for fold in folds:
-            for model in models:
-                row, right[fold.held_out, model] = _judge(fold, model, read, origin, args)
-                rows.append(row)
-                print(" | ".join(row), flush=True)
-        return rows
-    import multiprocessing
+def _judge_all(
+    folds, read: dict, origin: list[str], models: list[str], args
+) -> dict[tuple[str, str], tuple[list[str], Any]]:
+    """Every (building, model)'s row and judgements (``_judge``), printed as each ends;
+    ``args.jobs`` at once in spawned processes, which load the edges the parent read (a
+    pickle in build/) rather than read them again."""
     import pickle
 
+    done = {}
+    if args.jobs == 1:
+        for fold in folds:
+            for model in models:
+                done[fold.held_out, model] = _judge(fold, model, read, origin, args)
+                print(" | ".join(done[fold.held_out, model][0]), flush=True)
+        return done
     # Model by model (MODELS' order), each model's folds on the largest training sets (the
     # smallest buildings held out) first, so the last jobs to finish are short: score's.
     size = {f.held_out: sum(p.stat().st_size for p in f.train) for f in folds}
@@ -276,27 +285,20 @@ def _judge_all(folds, read: dict, origin: list[str], models: list[str], args, ri
         ((f.held_out, m) for f in folds for m in models),
         key=lambda j: (MODELS.index(j[1]), -size[j[0]]),
     )
-    done: dict[tuple[str, str], list[str]] = {}
     # One name, not a fresh temporary file: a run killed outright leaves its edges (most of
     # a gigabyte) for the next run to write over, not beside.
     store = BUILD / "lobo-reading.pickle"
     try:
         with store.open("wb") as f:
             pickle.dump({"read": read, "origin": origin}, f, protocol=pickle.HIGHEST_PROTOCOL)
-        spawn = multiprocessing.get_context("spawn")
-        with spawn.Pool(args.jobs, _start_worker, (args, store, folds)) as pool:
-            for building, model, row, mine in pool.imap_unordered(_pool_job, jobs):
-                done[building, model] = row
-                right[building, model] = mine
-                print(" | ".join(row), flush=True)
-            pool.close()  # every job is done: let the workers end rather than be terminated
-            pool.join()
+        for building, model, row, mine in spawned(
+            _pool_job, jobs, args.jobs, _start_worker, (args, store, folds)
+        ):
+            done[building, model] = row, mine
+            print(" | ".join(row), flush=True)
     finally:
         store.unlink(missing_ok=True)
-    # The paired comparison reads the buildings in fold order, not in the order they ended.
-    ordered = {(f.held_out, m): right.pop((f.held_out, m)) for f in folds for m in models}
-    right.update(ordered)
-    return [done[f.held_out, m] for f in folds for m in models]
+    return done
 
 
 def main() -> None:
@@ -372,8 +374,11 @@ def main() -> None:
     data = next(iter(read.values()))
     # Which file each edge came from: read_labelled keeps the files' order and each file's.
     origin = [f["path"] for f in data.files for _ in range(f["used"])]
-    right: Judged = {}
-    rows = _judge_all(folds, read, origin, models, args, right)
+    done = _judge_all(folds, read, origin, models, args)
+    # The table and the paired comparison read the buildings in fold order.
+    order = [(f.held_out, m) for f in folds for m in models]
+    rows = [done[key][0] for key in order]
+    right: Judged = {key: done[key][1] for key in order}
     wall = (time.perf_counter() - began) / 60
     print(
         "\n# leave-one-building-out, loops of each held-out building; epochs × draws per fold "

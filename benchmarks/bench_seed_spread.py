@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
-import multiprocessing
 import sys
 import time
 from dataclasses import dataclass
@@ -29,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _common import REPO, machine, table, watch_parent
+from _common import REPO, machine, spawned, table, watch_parent
 from bench_generalisation import buildings, fold_config, grid_tag, subset
 from folds import Fold, make_folds
 from numpy.typing import NDArray
@@ -188,13 +187,9 @@ def _train_all(args: argparse.Namespace) -> None:
             print(_job(job), flush=True)
         return
     print(f"{len(jobs)} jobs on {args.jobs} processes, {args.threads} threads each", flush=True)
-    # Spawned, each loading the edges itself: a pool forked after the parent had loaded them
-    # hung before its first job on a 16-core GPU machine (cause not traced).
-    with multiprocessing.get_context("spawn").Pool(args.jobs, _worker, (args,)) as pool:
-        for line in pool.imap_unordered(_job, jobs):
-            print(line, flush=True)
-        pool.close()  # every job is done: let the workers end rather than be terminated
-        pool.join()
+    # Each worker loads the edges itself.
+    for line in spawned(_job, jobs, args.jobs, _worker, (args,)):
+        print(line, flush=True)
 
 
 def _summary(
