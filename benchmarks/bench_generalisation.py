@@ -29,7 +29,9 @@ Run: python benchmarks/bench_generalisation.py [--models vgmnet,score] [--buildi
 ``--jobs 2 --threads 1`` trains two fold models at once, each in a process on one torch
 thread: on two cores that is about 1.8× the throughput for ``vgmnet`` (its small network
 gains little from a second thread) and 1.3× for ``rgb-baseline``. The workers load the edges
-the parent read, so the reading is done once.
+the parent read, so the reading is done once. With both networks at two-thirds of their
+recipes as well (``--epochs vgmnet=20,rgb-baseline=4``) the whole table takes about 43 minutes
+on two cores; at the full recipes, about 67 (BENCHMARKS.md).
 
 ``--second-look 4`` tests the network models with ``validator.SecondLook``: the pairs they
 are unsure of (p between 0.02 and 0.98) judged again, their logits averaged over the pair
