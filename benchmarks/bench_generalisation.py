@@ -41,6 +41,7 @@ turned four ways.
 from __future__ import annotations
 
 import argparse
+import pickle
 import subprocess
 import sys
 import time
@@ -248,8 +249,6 @@ _WORKER: dict[str, Any] = {}
 
 
 def _start_worker(args, store: Path, folds: list) -> None:
-    import pickle
-
     import torch
 
     watch_parent()
@@ -271,8 +270,6 @@ def _judge_all(
     """Every (building, model)'s row and judgements (``_judge``), printed as each ends;
     ``args.jobs`` at once in spawned processes, which load the edges the parent read (a
     pickle in build/) rather than read them again."""
-    import pickle
-
     done = {}
     if args.jobs == 1:
         for fold in folds:
