@@ -103,6 +103,7 @@ def test_epochs_per_model_or_for_all(monkeypatch):
     assert parse("vgmnet=12,rgb-baseline=4") == {"vgmnet": 12, "rgb-baseline": 4}
     # One number is every model's; a model left out keeps its recipe (dict.get -> None).
     assert parse("12") == dict.fromkeys(bench_generalisation.MODELS, 12)
+    assert parse("vgmnet=20") == {"vgmnet": 20}
     for bad, why in [("vgmnet=x", "not a number"), ("resnet=3", "unknown model"), ("0", "1 or")]:
         with pytest.raises(argparse.ArgumentTypeError, match=why):
             parse(bad)
