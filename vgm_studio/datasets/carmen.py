@@ -252,11 +252,14 @@ def format_robotlaser(
     laser_pose: Sequence[float] | NDArray[np.floating],
     timestamp: float,
     host: str = "vgm-studio",
+    robot_pose: Sequence[float] | NDArray[np.floating] | None = None,
 ) -> str:
-    """Formats one ROBOTLASER1 line (robot pose = laser pose, no remissions)."""
+    """Formats one ROBOTLASER1 line (no remissions); the robot's pose is the laser's unless
+    given."""
     n = len(ranges)
     fov = angle_increment * max(n - 1, 0)
     x, y, t = laser_pose
+    rx, ry, rt = laser_pose if robot_pose is None else robot_pose
     fields = [
         "ROBOTLASER1",
         "0",
@@ -269,7 +272,7 @@ def format_robotlaser(
         str(n),
         *(f"{r:.3f}" for r in ranges),
         "0",
-        *(f"{v:.6f}" for v in (x, y, t, x, y, t)),
+        *(f"{v:.6f}" for v in (x, y, t, rx, ry, rt)),
         "0",
         "0",
         "0",

@@ -58,6 +58,7 @@ class RawScan:
     odom_after: NDArray[np.float64] | None = None
     echoed: bool = False  # an ODOM line repeating the scan's pose followed it (GMapping output)
     fresh_odom: bool = False  # odom_before came after the scan before this one
+    robot_pose: NDArray[np.float64] | None = None  # ROBOTLASER1's second pose, the robot's
 
 
 class LineParser:
@@ -183,6 +184,7 @@ def parse_robotlaser(p: LineParser) -> RawScan:
         max_range=max_range,
         pose=p.pose(tail),
         odom_before=None,
+        robot_pose=p.pose(tail + 3),
     )
 
 
