@@ -39,6 +39,8 @@ class SlamResult:
         seconds: Wall time per stage.
         isam2_restarts: 1 when the running estimate had to rebuild iSAM2 with QR (see
             ``RunningEstimate.update``), else 0.
+        after_edges: The factors ``after`` was optimised over: the kept edges and the odometry
+            that stands in for each rejected sequential one (a g2o export writes these).
     """
 
     keyframes: NDArray[np.int64]
@@ -50,6 +52,7 @@ class SlamResult:
     threshold: float = float("nan")
     seconds: dict[str, float] = field(default_factory=dict)
     isam2_restarts: int = 0
+    after_edges: list[GraphEdge] = field(default_factory=list)
 
     @property
     def odometry_keyframes(self) -> NDArray[np.float64]:
@@ -202,4 +205,5 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
         threshold=validator.threshold,
         seconds=seconds,
         isam2_restarts=front.estimate.restarts,
+        after_edges=after_edges,
     )
