@@ -117,3 +117,49 @@ def test_only_the_page_is_served():
     assert Gate("127.0.0.1").refusal(Request("/", page)) is None
     assert Gate("127.0.0.1").refusal(Request("/etc/passwd", page)) == (404, "not found")
     assert Gate("0.0.0.0", "t").refusal(Request("/", page))[0] == 403  # type: ignore[index]
+
+
+_SERVE_SCRIPT = """
+import sys, time
+from pathlib import Path
+from vgm_studio.labels import LabelStore
+from vgm_studio.studio.app import Studio, StudioConfig
+studio = Studio(LabelStore(Path(sys.argv[1])), StudioConfig(port=int(sys.argv[2])))
+studio.start()
+print("listening", flush=True)
+time.sleep(60)
+"""
+
+
+def test_a_connection_closed_without_a_request_prints_no_traceback(tmp_path):
+    """A port check or a probe (connect, then close) leaves the studio's terminal clean."""
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    from benchmarks.studio_browser import free_port
+
+    port = free_port()
+    server = subprocess.Popen(
+        [sys.executable, "-c", _SERVE_SCRIPT, str(tmp_path / "ws"), str(port)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert server.stdout is not None
+        while "listening" not in server.stdout.readline():  # after viser's banner
+            assert server.poll() is None, "the studio did not start"
+        with socket.create_connection(("127.0.0.1", port), timeout=5):
+            pass  # connect and close: what a port check does
+        with socket.create_connection(("127.0.0.1", port), timeout=5) as half:
+            half.sendall(b"GET / HT")  # a client that gives up mid-request
+        time.sleep(1.0)
+        # The studio still answers afterwards.
+        assert urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10).status == 200
+    finally:
+        server.terminate()
+        _, stderr = server.communicate(timeout=30)
+    assert "Traceback" not in stderr
+    assert "handshake failed" not in stderr

@@ -13,13 +13,17 @@ The studio therefore answers every HTTP request itself before viser does:
   one is required. viser's client connects to the page's own path, so the token travels.
 
 viser 1.1 builds its websockets server inside ``ViserServer.__init__`` and offers no hook for
-this, so ``guarded_serve`` wraps ``websockets.asyncio.server.serve`` for exactly that call.
+this, so ``guarded_serve`` wraps ``websockets.asyncio.server.serve`` for exactly that call. It
+also gives that server a quieter logger: websockets logs every connection that closes before
+sending a request (a port check, a ``curl`` that gives up, a health probe) as an error with
+three chained tracebacks, which would fill the studio's terminal with noise.
 """
 
 from __future__ import annotations
 
 import gzip
 import http
+import logging
 import secrets
 import threading
 from collections.abc import Callable, Iterator
@@ -51,6 +55,10 @@ _KEY_GUARD_JS = """<script>
 </script>"""
 
 _guard_lock = threading.Lock()
+
+# The websockets server's logger (see ``_QuietHandshakes``); a child of websockets' own, so
+# logging set up for websockets still reaches it.
+_WS_LOG = logging.getLogger("websockets.server.studio")
 
 
 def is_loopback(host: str) -> bool:
@@ -140,6 +148,41 @@ def _process_request(gate: Gate) -> Callable[[Any, Request], Response | None]:
     return process
 
 
+def _closed_early(exc: BaseException | None) -> bool:
+    """Whether a failed handshake is a client that closed or reset before a whole request."""
+    while exc is not None:
+        if isinstance(exc, (EOFError, ConnectionError)):
+            return True
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+class _QuietHandshakes(logging.Filter):
+    """Turns websockets' "opening handshake failed" and its tracebacks into one line.
+
+    A client that closes before sending a request is routine (port checks, probes, a browser
+    dropping a spare connection): one DEBUG line, unseen unless asked for. Any other failed
+    handshake (a malformed request) is one WARNING line with the reason, no traceback: the
+    cause is the client's, and nothing in the studio can be debugged from websockets' stack.
+    Everything else websockets logs passes unchanged.
+    """
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.msg != "opening handshake failed" or not record.exc_info:
+            return True
+        exc = record.exc_info[1]
+        if _closed_early(exc):
+            _WS_LOG.debug("a connection closed before sending a request")
+        else:
+            cause = exc.__cause__ if exc is not None else None
+            reason = f"{exc}" + (f" ({cause})" if cause is not None else "")
+            _WS_LOG.warning("refused a connection: %s", reason)
+        return False
+
+
+_WS_LOG.addFilter(_QuietHandshakes())
+
+
 @contextmanager
 def guarded_serve(gate: Gate) -> Iterator[None]:
     """Within this block, a websockets server started (by viser) answers through ``gate``.
@@ -152,6 +195,7 @@ def guarded_serve(gate: Gate) -> Iterator[None]:
 
     def serve(*args: Any, **kwargs: Any) -> Any:
         kwargs["process_request"] = _process_request(gate)
+        kwargs["logger"] = _WS_LOG
         return original(*args, **kwargs)
 
     with _guard_lock:
