@@ -68,8 +68,12 @@ def write_tum(path: Path, timestamps: NDArray[np.float64], poses: NDArray[np.flo
     if np.any(np.diff(times) <= 0):
         raise ValueError("timestamps must be strictly increasing")
     half = poses[:, 2] / 2
+    # Rounded to the printed digits first, and + 0.0, so that a value that rounds to zero
+    # prints as 0, never -0.
+    xy = np.round(poses[:, :2], 6) + 0.0
+    quaternion = np.round(np.column_stack([np.sin(half), np.cos(half)]), 9) + 0.0
     lines = [f"# {' '.join(FIELDS)}\n"]
-    for t, (x, y, _), qz, qw in zip(times, poses, np.sin(half), np.cos(half), strict=True):
+    for t, (x, y), (qz, qw) in zip(times, xy, quaternion, strict=True):
         lines.append(f"{float(t)!r} {x:.6f} {y:.6f} 0 0 0 {qz:.9f} {qw:.9f}\n")
     try:
         write_text_atomically(path, "".join(lines))
