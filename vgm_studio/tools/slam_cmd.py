@@ -125,6 +125,30 @@ def slam(
             metavar="DIR", help="Write odometry, before and after maps (and all three) as PNG."
         ),
     ] = None,
+    ros_map: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="DIR",
+            help="Write the after map as ROS map_server / Nav2 load it: DIR/map.pgm and "
+            "DIR/map.yaml.",
+        ),
+    ] = None,
+    trajectory: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="OUT.txt",
+            help="Write every scan's pose of the after graph as a TUM trajectory "
+            "(timestamp x y z qx qy qz qw), as evo and other evaluation tools read it.",
+        ),
+    ] = None,
+    g2o: Annotated[
+        Path | None,
+        typer.Option(
+            metavar="OUT.g2o",
+            help="Write the after graph as g2o 2D (VERTEX_SE2 with each keyframe's scan as "
+            "ROBOTLASER1, EDGE_SE2, FIX), as g2o, gtsam and other optimisers read it.",
+        ),
+    ] = None,
     record: Annotated[
         Path | None,
         typer.Option(metavar="OUT.rrd", help="Write a rerun recording (no viewer needed)."),
@@ -180,11 +204,13 @@ def slam(
         ValidationConfig,
     )
 
-    for out in (json_out, record, loops_out):
+    for out in (json_out, record, loops_out, trajectory, g2o):
         if out is not None:
             writable_file(out)
     if map_png is not None:
         writable_folder(map_png, "--map-png")
+    if ros_map is not None:
+        writable_folder(ros_map, "--ros-map")
     config = SlamConfig(
         front_end=FrontEndConfig(
             keyframe_distance=keyframe_distance,
@@ -214,6 +240,15 @@ def slam(
         reference=reference,
         relations=relations,
         join=JoinOptions(time_tolerance, time_offset),
-        outputs=SlamOutputs(json_out, map_png, record, spawn, loops_out),
+        outputs=SlamOutputs(
+            json_out,
+            map_png,
+            record,
+            spawn,
+            loops_out,
+            trajectory=trajectory,
+            ros_map=ros_map,
+            g2o=g2o,
+        ),
         voice=Voice(typer.echo, lambda line: typer.echo(line, err=True)),
     )
