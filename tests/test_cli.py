@@ -88,7 +88,8 @@ def test_candidates_on_intel_give_both_labels_and_stable_ids(datasets, tmp_path,
     png = artifacts / "intel-success-edge.png"
     run("vgm", out1, "--edge", success["edge_id"][:10], "--png", png)
     img = cv2.imread(str(png))
-    assert img is not None and 600 <= img.shape[1] <= 800 and img.shape[0] > img.shape[1]
+    # The rectangle around the pair at 4 pixels or more a cell, under a caption.
+    assert img is not None and img.shape[1] >= 600 and img.shape[0] > 200
     # Both scans are drawn, each in its own colour.
     for bgr in ((255, 170, 40), (30, 140, 255)):
         assert (np.abs(img.astype(int) - bgr).sum(axis=2) < 30).sum() > 200

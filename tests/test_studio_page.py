@@ -105,26 +105,42 @@ def _hues(pixels: np.ndarray) -> tuple[int, int]:
     return int(green.sum()), int(magenta.sum())
 
 
+def _agreeing(pixels: np.ndarray) -> int:
+    """Count of white or light grey pixels: cells both channels lit (points are not grey)."""
+    return int(((pixels.min(axis=2) > 150) & (np.ptp(pixels, axis=2) < 50)).sum())
+
+
 def test_the_vgm_heatmap_is_visible_and_v_steps_through_the_layers(studio, artifacts):
     with chromium() as browser:
         tab = StudioPage(browser.new_page(), studio.url)
         both = _view_pixels(tab)
         tab.screenshot(artifacts / "studio-heatmap.png")
+        body = tab.page.inner_text("body")
+        assert "points and VGM (V)" in body and "within a beam spacing" in body
         green, magenta = _hues(both)
-        assert green > 300 and magenta > 300
         region = both[_drawn(both)]
         assert region.std(axis=0).mean() > 25  # colour varies: cells, not a flat rectangle
+        tab.page.keyboard.press("v")  # the raw cells, one key away
+        tab.wait_for(lambda: "raw VGM cells" in tab.page.inner_text("body"))
+        raw = _view_pixels(tab)
+        tab.screenshot(artifacts / "studio-heatmap-raw.png")
+        raw_green, raw_magenta = _hues(raw)
+        # The first edge is a right one: spread, its far walls read white, not as the
+        # alternating green and magenta cells of the raw layer.
+        assert raw_green > 300 and raw_magenta > 300
+        assert green + magenta < (raw_green + raw_magenta) / 2, (green, magenta, raw_green)
+        assert _agreeing(both) > 1.3 * _agreeing(raw), (_agreeing(both), _agreeing(raw))
         tab.page.keyboard.press("v")  # VGM only: no blue or orange points
         tab.wait_for(lambda: "VGM only" in tab.page.inner_text("body"))
         vgm_only = _view_pixels(tab)
         r, g, b = (vgm_only[..., i] for i in range(3))
         orange = (r > 200) & (g > 100) & (g < 170) & (b < 80)
-        assert int(orange.sum()) < 20 and _hues(vgm_only)[1] > 300
+        assert int(orange.sum()) < 20 and _agreeing(vgm_only) > 300
         tab.page.keyboard.press("v")  # points only: no VGM cells
         tab.wait_for(lambda: "points only" in tab.page.inner_text("body"))
         points_green, points_magenta = _hues(_view_pixels(tab))
         # Green left: the poses' y axes only.
-        assert points_magenta < 20 and points_green < green / 4
+        assert points_magenta < 20 and points_green < raw_green / 4
         panel_images = tab.page.locator("img").count()
         assert panel_images >= 2  # the VGM channels and the minimap
         # At 1400×850, Train now is in view without scrolling.

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import random
 
 import numpy as np
@@ -100,3 +101,71 @@ def test_agreement_pairs_every_two_annotators_on_their_shared_edges():
     assert (pairs["ana", "bob"].shared, pairs["ana", "bob"].agreed) == (2, 1)
     assert (pairs["ana", "cy"].shared, pairs["ana", "cy"].agreed) == (1, 0)
     assert agreement(labels)[0].shared == 2  # most shared first
+
+
+def _one_hued(rgb: np.ndarray) -> np.ndarray:
+    """Which colours read as one channel alone: green or magenta, not white or grey."""
+    c = rgb.astype(int)
+    r, g, b = c[..., 0], c[..., 1], c[..., 2]
+    return ((g > r + 60) & (g > b + 60)) | ((r > g + 60) & (b > g + 60))
+
+
+def test_spread_makes_two_sparse_scans_of_one_wall_agree():
+    from vgm_studio.vgm.spread import spread_pair
+
+    # One wall 8 m away, each scan's returns 20 cm apart, the second's shifted by 10 cm along
+    # it: a perfect match whose raw cells never coincide.
+    xs = np.arange(-3.0, 3.0, 0.2)
+    prev = np.column_stack([xs, np.full_like(xs, 8.02)])
+    cur = prev + np.array([0.1, 0.0])
+    vgm = np.zeros((2, 400, 400), np.float32)
+    for k, pts in enumerate((prev, cur)):
+        idx = np.floor((pts + 10.0) / 0.05).astype(int)
+        vgm[k, idx[:, 1], idx[:, 0]] = 1.0
+    occupied = (vgm[0] > 0) | (vgm[1] > 0)
+    raw = blend(vgm)[occupied]
+    assert _one_hued(raw).all()  # every cell green or magenta: reads as a failure
+    spread = blend(vgm, spread_pair(vgm, (-10.0, -10.0), 0.05, (prev, cur)))[occupied]
+    assert not _one_hued(spread).any() and spread.min() > 200  # white: they agree
+    # Moved 40 cm off the wall (a wrong match), the two stay apart.
+    wrong = np.zeros_like(vgm)
+    wrong[0] = vgm[0]
+    off = cur + np.array([0.0, 0.4])
+    idx = np.floor((off + 10.0) / 0.05).astype(int)
+    wrong[1, idx[:, 1], idx[:, 0]] = 1.0
+    spread = spread_pair(wrong, (-10.0, -10.0), 0.05, (prev, off))
+    occupied = (wrong[0] > 0) | (wrong[1] > 0)
+    assert _one_hued(blend(wrong, spread)[occupied]).all()
+
+
+def test_the_default_heatmap_reads_a_right_edge_as_agreement(office_edges):
+    edges = read_edges(office_edges)
+    right = next(e for e in edges if e.kind == "sequential" and e.label == "success")
+    placed = make_view(right, EdgeScans(), VGMParams()).estimate
+    raw, spread = _one_hued(placed.raw_rgb).mean(), _one_hued(placed.cell_rgb).mean()
+    # Raw, most cells read as one scan's (0.82); spread, only the wall behind the current
+    # scan, which it cannot see (0.24).
+    assert raw > 0.6 and spread < raw / 2.5, (raw, spread)
+    # The same pair placed 60 cm off: most cells keep one scan's hue.
+    wrong = dataclasses.replace(right, estimate=[right.estimate[0], right.estimate[1] + 0.6, 0.0])
+    placed = make_view(wrong, EdgeScans(), VGMParams()).estimate
+    assert _one_hued(placed.cell_rgb).mean() > 0.4
+
+
+def test_vgm_pictures_show_the_cells_beside_the_points(office_edges, tmp_path):
+    """``vgm-studio vgm``: the VGM's cells, in their own hues, outnumber the points' pixels."""
+    from vgm_studio.vgm.picture import edge_picture
+    from vgm_studio.vgm.render import BACKGROUND, CUR_BGR, PREV_BGR
+
+    edge = next(e for e in read_edges(office_edges) if e.kind == "sequential")
+    bgr = edge_picture(edge, tmp_path / "e.png").astype(int)
+    picture = bgr[bgr.shape[0] // 4 :]  # below the caption
+    points = sum(
+        int((np.abs(picture - colour.astype(int)).sum(axis=2) < 30).sum())
+        for colour in (PREV_BGR, CUR_BGR)
+    )
+    rgb = picture[..., ::-1]
+    lit = np.abs(picture - BACKGROUND).max(axis=2) > 40
+    agreeing = lit & (np.ptp(rgb, axis=2) < 60)  # white or grey cells: both scans
+    assert agreeing.sum() > 3 * points, (int(agreeing.sum()), points)
+    assert _one_hued(rgb[lit]).sum() > 100  # and cells one scan alone has, green or magenta

@@ -30,7 +30,7 @@ from vgm_studio.studio.panel import (
     position_text,
 )
 from vgm_studio.studio.queues import Queue, Snapshot, order
-from vgm_studio.studio.scene import TabScene
+from vgm_studio.studio.scene import Layers, TabScene
 from vgm_studio.studio.tab import Tab
 from vgm_studio.studio.team import StoreLink
 from vgm_studio.studio.view import EdgeView, ViewCache
@@ -190,7 +190,7 @@ class Studio:
         actions: dict[str, Callable[[], None]] = {}
         panel = build_panel(client, self.config.annotator, self.config.queue, actions)
         panel.trainer.content = self._trainer_text
-        panel.layers.content = layers_text("points and VGM")
+        panel.layers.content = layers_text(Layers.both.value)
         tab = Tab(
             client,
             panel,

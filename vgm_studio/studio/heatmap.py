@@ -1,10 +1,12 @@
 """The VGM as the annotator sees it: a two-channel blend in the 3D view, two colormaps in the panel.
 
 In the 3D view the channels are blended additively in green (previous scan) and magenta
-(current scan): where both scans put weight the cell turns white, where only one does it keeps
-that scan's hue. Those hues are not the points' blue and orange, so the cells stay readable
-under the points. In the panel the two channels stand side by side in a perceptual colormap
-(inferno), cropped to the occupied cells, with a value bar and the blend's legend.
+(current scan), white where both put weight (``vgm.blend``). By default the hues are mixed
+from the channels spread over each scan's point spacing (``vgm.spread``): far from the sensor
+two scans of one wall hit different cells, and the raw cells would show a right match as
+green and magenta side by side. The cells drawn are the raw ones either way. In the panel the
+two channels stand side by side in a perceptual colormap (inferno), cropped to the occupied
+cells, with a value bar and the blend's legend.
 """
 
 from __future__ import annotations
@@ -15,34 +17,13 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-# RGB, 0..1: additive, so both channels at full weight give white.
-PREV_HUE = np.array([0.1, 1.0, 0.25], dtype=np.float32)
-CUR_HUE = np.array([1.0, 0.1, 0.9], dtype=np.float32)
-BACKGROUND_RGB = np.array([17, 17, 17], dtype=np.float32)
-# A cell's value is its share of the channel's largest, and most cells sit far below 0.1:
-# the square root and a floor keep every occupied cell visible; empty cells stay background.
-GAMMA = 0.5
-FLOOR = 0.35
+from vgm_studio.vgm.blend import BACKGROUND_RGB, CUR_HUE, GAMMA, PREV_HUE, blend
+
+__all__ = ["BACKGROUND_RGB", "CUR_HUE", "PANEL_WIDTH", "PREV_HUE", "blend", "channels_panel"]
+
 PANEL_WIDTH = 360  # pixels; the panel is about this wide in viser's "large" layout
 _TILE = 170
 _BAR = 10
-
-
-def _lift(channel: NDArray[np.float32]) -> NDArray[np.float32]:
-    peak = float(channel.max())
-    if peak <= 0:
-        return np.zeros_like(channel)
-    v = np.clip(channel / peak, 0, 1) ** GAMMA
-    return np.where(channel > 0, FLOOR + (1 - FLOOR) * v, 0.0).astype(np.float32)
-
-
-def blend(vgm: NDArray[np.float32]) -> NDArray[np.uint8]:
-    """(2, H, W) VGM → (H, W, 3) RGB, row 0 at the grid's first row (-y)."""
-    a, b = _lift(vgm[0]), _lift(vgm[1])
-    rgb = a[..., None] * PREV_HUE + b[..., None] * CUR_HUE
-    lit = np.clip(rgb, 0, 1) * 255.0
-    out = np.where((a + b)[..., None] > 0, lit, BACKGROUND_RGB)
-    return np.ascontiguousarray(out.astype(np.uint8))
 
 
 def _max_pool(channel: NDArray[np.float32], k: int) -> NDArray[np.float32]:

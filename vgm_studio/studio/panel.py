@@ -143,10 +143,11 @@ def _title(action: str) -> str:
 
 def layers_text(layers: str) -> str:
     """The 3D view's legend and which layers show."""
+    both = "in the same cell" if "raw" in layers else "within a beam spacing"
     return (
         f"<small>3D view: {layers} (V) · R resets the view. Points: blue previous scan, "
         "orange current scan, grey current scan at its reference pose. VGM cells: green "
-        "previous, magenta current, white both.</small>"
+        f"previous, magenta current, white both {both}.</small>"
     )
 
 

@@ -23,7 +23,12 @@ from vgm_studio.studio.view import (
 _ONE_POINT = np.zeros((1, 3), dtype=np.float32)  # placeholder until an edge has a reference
 # Points in screen pixels (viser sizes them in metres, so they are resized with each framing):
 # over the VGM they are thinner than its 5 cm cells, so the cells show around them.
-POINT_PIXELS = {"points and VGM": 1.4, "VGM only": 1.4, "points only": 2.5}
+POINT_PIXELS = {
+    "points and VGM": 1.4,
+    "points and raw VGM cells": 1.4,
+    "VGM only": 1.4,
+    "points only": 2.5,
+}
 POINT_SIZE = 0.018  # metres, until the first framing
 # Share of the view the pair may fill along its tighter axis; the rest is margin.
 FILL = 0.85
@@ -35,9 +40,14 @@ CAMERA_HEIGHT = 10.0  # the fixed camera's height, in the fitted scene's units
 
 
 class Layers(str, Enum):
-    """What the 3D view shows; ``V`` steps through them in this order."""
+    """What the 3D view shows; ``V`` steps through them in this order.
+
+    The VGM cells' hues are mixed from the spread channels (``vgm.spread``) except in ``raw``,
+    which mixes the cells' own values: one key away, for checking what the model sees.
+    """
 
     both = "points and VGM"
+    raw = "points and raw VGM cells"
     vgm = "VGM only"
     points = "points only"
 
@@ -138,7 +148,7 @@ class TabScene:
             self._make(view, placed)
             self.reset_view()
         cells = self.nodes["vgm"]
-        cells.points, cells.colors = fit(placed.cells), placed.cell_rgb
+        cells.points, cells.colors = fit(placed.cells), self._cell_colours(placed)
         cell_size = placed.resolution * scale
         if not math.isclose(cells.point_size, cell_size, rel_tol=1e-3):
             cells.point_size = cell_size
@@ -203,10 +213,13 @@ class TabScene:
             "/poses", segments, colours, thickness=4.0, thickness_units="screen"
         )
 
+    def _cell_colours(self, placed: PlacedPair) -> NDArray[np.uint8]:
+        return placed.raw_rgb if self.layers is Layers.raw else placed.cell_rgb
+
     def _apply_layers(self, has_reference: bool) -> None:
-        points = self.layers in (Layers.both, Layers.points)
+        points = self.layers in (Layers.both, Layers.raw, Layers.points)
         wanted = {
-            "vgm": self.layers in (Layers.both, Layers.vgm),
+            "vgm": self.layers in (Layers.both, Layers.raw, Layers.vgm),
             "previous": points,
             "current": points,
             "reference_scan": points and has_reference,
@@ -219,8 +232,11 @@ class TabScene:
 
     def cycle_layers(self) -> Layers:
         """Steps to the next layers (V) and shows them on the pair drawn now."""
+        before = self.layers
         self.layers = self.layers.next()
         if self._shown is not None:
+            if Layers.raw in (before, self.layers) and "vgm" in self.nodes:
+                self.nodes["vgm"].colors = self._cell_colours(self._shown[1])
             self._apply_layers(self._shown[0].reference is not None)
             self._size_points()
         return self.layers

@@ -17,6 +17,7 @@ from vgm_studio.studio.heatmap import blend, channels_panel
 from vgm_studio.studio.minimap import Trajectory, minimap, trajectory
 from vgm_studio.vgm.grid import VGMParams, pair_map
 from vgm_studio.vgm.render import CUR_BGR, PREV_BGR
+from vgm_studio.vgm.spread import spread_pair
 
 PREV_RGB: tuple[int, int, int] = (int(PREV_BGR[2]), int(PREV_BGR[1]), int(PREV_BGR[0]))
 CUR_RGB: tuple[int, int, int] = (int(CUR_BGR[2]), int(CUR_BGR[1]), int(CUR_BGR[0]))
@@ -28,10 +29,11 @@ class PlacedPair:
     """The pair with the current scan placed by one pose (the estimate or the initial guess)."""
 
     pose: NDArray[np.float64]
-    heatmap_rgb: NDArray[np.uint8]  # (h, w, 3) RGB, row i along +y: the occupied part of the VGM
+    heatmap_rgb: NDArray[np.uint8]  # (h, w, 3) RGB, row i along +y: the occupied part, spread
     channels_rgb: NDArray[np.uint8]  # the panel's picture of both channels (heatmap.channels_panel)
     cells: NDArray[np.float32]  # (K, 3) centres of the occupied cells, metres, z just below 0
-    cell_rgb: NDArray[np.uint8]  # (K, 3) their colours in the heatmap
+    cell_rgb: NDArray[np.uint8]  # (K, 3) their colours mixed from the spread channels
+    raw_rgb: NDArray[np.uint8]  # (K, 3) their colours mixed from the raw channels
     heatmap_centre: tuple[float, float]  # where the crop's centre lies, metres
     cur: NDArray[np.float32]  # (M, 3) current scan in the previous scan's frame
     resolution: float  # metres per heatmap pixel (the VGM's cell size)
@@ -74,7 +76,10 @@ def _xyz(points: NDArray[np.float64]) -> NDArray[np.float32]:
 
 
 def _placed(
-    prev: NDArray[np.float64], cur: NDArray[np.float64], pose: list[float], params: VGMParams
+    prev: NDArray[np.float64],
+    cur: NDArray[np.float64],
+    pose: list[float],
+    params: VGMParams,
 ) -> PlacedPair:
     pose_arr = np.asarray(pose, dtype=np.float64)
     vgm = pair_map(
@@ -82,16 +87,22 @@ def _placed(
     )
     (r0, r1, c0, c1), centre = _crop(vgm, params.resolution)
     crop = vgm[:, r0:r1, c0:c1]
-    rgb = blend(crop)  # row 0 at the grid's -y edge, as viser draws an image's first row
+    half = params.size * params.resolution / 2
+    origin = (-half + c0 * params.resolution, -half + r0 * params.resolution)
+    moved = se2.transform_points(pose_arr, cur)
+    spread = spread_pair(crop, origin, params.resolution, (prev, moved))
+    rgb = blend(crop, spread)  # row 0 at the grid's -y edge, as viser draws an image's first row
     cells, cell_rgb = _cells(crop, rgb, centre, params.resolution)
+    _, raw_rgb = _cells(crop, blend(crop), centre, params.resolution)
     return PlacedPair(
         pose_arr,
         rgb,
         channels_panel(crop),
         cells,
         cell_rgb,
+        raw_rgb,
         centre,
-        _xyz(se2.transform_points(pose_arr, cur)),
+        _xyz(moved),
         params.resolution,
     )
 

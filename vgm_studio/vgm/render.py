@@ -10,6 +10,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vgm_studio.core import se2
+from vgm_studio.vgm.blend import blend
+from vgm_studio.vgm.spread import spread_pair
 
 # BGR colours: previous scan blue-cyan, current scan orange, as in most scan-matching viewers.
 PREV_BGR = np.array([255, 170, 40], dtype=np.float32)
@@ -21,6 +23,9 @@ BACKGROUND = 18
 # value scales with its hit count over the grid's largest, so most cells of a scan sit far below
 # 0.1 and vanished into the black background.
 MIN_CELL_BRIGHTNESS = 0.5
+# Pixels per VGM cell at least: at two, a scan's points covered their own cells and the VGM
+# under them could not be seen; at four a point (one pixel) leaves most of its cell showing.
+MIN_CELL_PIXELS = 4
 
 
 @dataclass(frozen=True)
@@ -63,8 +68,12 @@ def draw_pair(
 ) -> NDArray[np.uint8]:
     """Draws the VGM heatmap, both scans' points and both sensor poses, as a BGR image.
 
-    The view is the square of cells around everything drawn (plus a 1 m margin), scaled up
-    to about ``width`` pixels so single cells stay visible.
+    The view is the rectangle of cells around everything drawn (plus a 1 m margin), scaled
+    up to about ``width`` pixels and to at least ``MIN_CELL_PIXELS`` a cell, so single cells
+    stay visible beside the points. The cells are coloured as in the
+    studio's 3D view: green previous, magenta current, white where the other scan has weight
+    within its point spacing (``blend.blend`` of ``spread.spread_pair``); those hues are not
+    the points' blue and orange, so the cells stay readable under the points.
 
     Args:
         vgm: (2, size, size) VGM of the pair.
@@ -89,8 +98,11 @@ def draw_pair(
     if ghost is not None and ghost_pose is not None:
         extent += [ghost, np.asarray(ghost_pose[:2], dtype=np.float64).reshape(1, 2)]
     i0, i1, j0, j1 = _view(np.vstack(extent), size, resolution)
-    scale = max(2, width // (j1 - j0))
-    crop = heatmap(vgm[:, i0:i1, j0:j1])
+    scale = max(MIN_CELL_PIXELS, width // (j1 - j0))
+    origin = (-half + j0 * resolution, -half + i0 * resolution)
+    cells = vgm[:, i0:i1, j0:j1]
+    spread = spread_pair(cells, origin, resolution, (prev_points, moved))
+    crop = np.ascontiguousarray(blend(cells, spread)[::-1, :, ::-1])  # BGR, +y up
     img: NDArray[np.uint8] = np.asarray(
         cv2.resize(
             crop, (crop.shape[1] * scale, crop.shape[0] * scale), interpolation=cv2.INTER_NEAREST
@@ -106,9 +118,9 @@ def draw_pair(
         v = (y1 - pts[:, 1]) * px_per_m
         return np.round(np.column_stack([u, v])).astype(np.int32)
 
-    # At two or three pixels a cell, a point drawn as a disc would hide its own cell: draw it
-    # as one pixel so the VGM cell around it (the thing the model sees) stays visible.
-    radius = 0 if scale < 4 else max(1, scale // 4)
+    # A point drawn as a disc would hide its own cell: one pixel, until cells are big enough
+    # that a disc leaves most of the cell (the thing the model sees) visible.
+    radius = 0 if scale < 8 else max(1, scale // 8)
     if ghost is not None and ghost_pose is not None:
         # Only on empty background, so it never hides the VGM or the scans it is compared with.
         empty = np.all(img == BACKGROUND, axis=2)
@@ -148,15 +160,13 @@ def _draw_points(
 
 
 def _view(points: NDArray[np.float64], size: int, resolution: float) -> tuple[int, int, int, int]:
-    """Rows i0:i1 and columns j0:j1 of the square of cells around ``points`` plus 1 m."""
+    """Rows i0:i1 and columns j0:j1 of the rectangle of cells around ``points`` plus 1 m."""
     half = 0.5 * size * resolution
-    lo = np.clip(np.floor((points.min(axis=0) - 1.0 + half) / resolution), 0, size)
-    hi = np.clip(np.ceil((points.max(axis=0) + 1.0 + half) / resolution), 0, size)
-    side = int(max(hi - lo))
-    centre = (lo + hi) / 2
-    start = np.clip(np.round(centre - side / 2), 0, size - side).astype(int)
-    j0, i0 = int(start[0]), int(start[1])
-    return i0, i0 + side, j0, j0 + side
+    lo = np.clip(np.floor((points.min(axis=0) - 1.0 + half) / resolution), 0, size - 1)
+    hi = np.clip(np.ceil((points.max(axis=0) + 1.0 + half) / resolution), lo + 1, size)
+    j0, i0 = int(lo[0]), int(lo[1])
+    j1, i1 = int(hi[0]), int(hi[1])
+    return i0, i1, j0, j1
 
 
 def _draw_pose(
