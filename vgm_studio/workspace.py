@@ -14,7 +14,7 @@ from vgm_studio.core.hashing import content_hash
 from vgm_studio.datasets import ReadOptions
 from vgm_studio.datasets.source import JoinOptions, read_source
 from vgm_studio.errors import InputError, require_utf8_path
-from vgm_studio.labels.opening import open_store
+from vgm_studio.labels.opening import store_to_fill
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.matching.candidates import CandidateConfig, make_candidates
 from vgm_studio.matching.edge_scans import check_viewable
@@ -39,6 +39,22 @@ def _quiet(_line: str) -> None:
 def source_key(source: Path, reference: Path | None) -> str:
     """What a source is known by in the store: its content, and the reference's path."""
     return f"{content_hash(source)}:{reference.resolve() if reference else ''}"
+
+
+def check_source(source: Path, reference: Path | None = None) -> None:
+    """Refuses a source or reference that is not there (or whose path is not UTF-8), before
+    anything is made for it.
+
+    Raises:
+        InputError: Naming the path.
+    """
+    for path in (source, reference):
+        if path is not None:
+            require_utf8_path(path)
+    if not source.exists():
+        raise InputError(source, "no such file or folder")
+    if reference is not None and not reference.exists():
+        raise InputError(reference, "no such reference file")
 
 
 def fill_workspace(
@@ -67,11 +83,7 @@ def fill_workspace(
     Returns:
         How many edges were new.
     """
-    for path in (source, reference):
-        if path is not None:
-            require_utf8_path(path)
-    if not source.exists():
-        raise InputError(source, "no such file or folder")
+    check_source(source, reference)
     key = source_key(source, reference)
     if options.laser_pose is not None or options.laser_flipped:
         # Another mount places the scans elsewhere: other edges, not the ones already there.
@@ -167,7 +179,7 @@ def open_demo(
 ) -> tuple[LabelStore, Path | None]:
     """The demo workspace (or team store at ``url``), filled from the bundled demo log; with
     the bundled model's predictions stored when ``predict`` (else the server makes them in
-    the background).
+    the background). A workspace made here is removed again when this fails.
 
     Returns:
         The store and the bundled model (None when it is missing).
@@ -181,9 +193,11 @@ def open_demo(
             "bundled demo log missing; remake it with: "
             "vgm-studio simulate --out datasets --preset demo --seed 0",
         )
-    store = open_store(workspace, url)
-    fill_workspace(store, DEMO_LOG, None, ReadOptions(), max_loops=DEMO_LOOPS, say=say, warn=warn)
     model = choose_model(None, precision=precision, warn=warn)
-    if predict and model is not None:
-        predict_workspace(store, model, precision=precision, say=say)
+    with store_to_fill(workspace, url) as store:
+        fill_workspace(
+            store, DEMO_LOG, None, ReadOptions(), max_loops=DEMO_LOOPS, say=say, warn=warn
+        )
+        if predict and model is not None:
+            predict_workspace(store, model, precision=precision, say=say)
     return store, model

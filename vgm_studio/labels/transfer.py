@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -154,18 +155,39 @@ def _csv_row(path: Path, lineno: int, row: dict[str | None, Any]) -> dict[str, A
     return parsed
 
 
-def import_labels(store: LabelStore, path: Path) -> tuple[int, int]:
-    """Adds a label file's edges and labels to the store; a newer label wins.
+@dataclass(frozen=True)
+class LabelFile:
+    """A label file read and checked whole, ready to be written to a store.
 
-    Every row is checked first (its schema, and that the studio can show its edge: the log
-    is there, unchanged, and holds the scans), then everything is written in one
-    transaction: a bad row, or a failure while writing, changes nothing.
+    Attributes:
+        path: The file.
+        edges: Its rows' edges, in file order.
+        records: Its rows' labels, in file order.
+    """
 
-    Returns:
-        (edges added, labels added or updated).
+    path: Path
+    edges: list[Edge]
+    records: list[LabelRecord]
+
+    def write_to(self, store: LabelStore) -> tuple[int, int]:
+        """Adds the edges and labels in one transaction; a newer label wins.
+
+        Returns:
+            (edges added, labels added or updated).
+        """
+        return store.import_all(self.edges, self.records)
+
+
+def read_label_file(path: Path) -> LabelFile:
+    """Reads and checks an exported label file, touching no store.
+
+    Every row is checked: its schema, and that the studio can show its edge (the log is
+    there, unchanged, and holds the scans). So a command can refuse a bad file before it
+    makes or opens a workspace.
 
     Raises:
-        InputError: A row is not an exported label (names the file, line and field).
+        InputError: A row is not an exported label (names the file, line and field), or
+            the file holds none.
     """
     rows: list[tuple[int, Edge]] = []
     records: list[LabelRecord] = []
@@ -180,4 +202,19 @@ def import_labels(store: LabelStore, path: Path) -> tuple[int, int]:
     if not records:
         raise InputError(path, "holds no labels")
     check_viewable(rows, path)
-    return store.import_all((edge for _, edge in rows), records)
+    return LabelFile(path, [edge for _, edge in rows], records)
+
+
+def import_labels(store: LabelStore, path: Path) -> tuple[int, int]:
+    """Adds a label file's edges and labels to the store; a newer label wins.
+
+    Every row is checked first (``read_label_file``), then everything is written in one
+    transaction: a bad row, or a failure while writing, changes nothing.
+
+    Returns:
+        (edges added, labels added or updated).
+
+    Raises:
+        InputError: A row is not an exported label (names the file, line and field).
+    """
+    return read_label_file(path).write_to(store)

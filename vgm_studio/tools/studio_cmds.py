@@ -101,34 +101,39 @@ def label(
     time_tolerance: TimeToleranceOpt = 0.05,
 ) -> None:
     """Serve a log's candidate edges (or an edges file) in the browser for labeling."""
-    from vgm_studio.labels.opening import open_store
+    from vgm_studio.labels.opening import store_to_fill
     from vgm_studio.studio.app import StudioConfig, check_port_free, default_annotator
     from vgm_studio.studio.serve import TrainerOptions, added_text, serve
-    from vgm_studio.workspace import choose_model, fill_workspace
+    from vgm_studio.workspace import check_source, choose_model, fill_workspace
 
     folder, url = store_location(workspace, store, models_dir, Path(f"{source.stem}.studio"))
     check_host(host)
     check_port_free(host, port)
-    opened = open_store(folder, url)
-    before = opened.count_edges()
-    added = fill_workspace(
-        opened,
-        source,
-        reference,
-        read,
-        max_loops,
-        JoinOptions(time_tolerance=time_tolerance, time_offset=time_offset),
-        say=typer.echo,
-        warn=_warn,
-    )
+    # Every cheap check before the workspace is made, and the making of candidate edges
+    # (minutes on a large log): a typo costs neither a stray folder nor the wait.
+    check_source(source, reference)
+    chosen = choose_model(model, no_model, precision=loop_precision or None, warn=_warn)
+    trainer = None if no_trainer else TrainerOptions.checked(retrain_every, base, min_held_out)
+    with store_to_fill(folder, url) as opened:
+        before = opened.count_edges()
+        added = fill_workspace(
+            opened,
+            source,
+            reference,
+            read,
+            max_loops,
+            JoinOptions(time_tolerance=time_tolerance, time_offset=time_offset),
+            say=typer.echo,
+            warn=_warn,
+        )
     if before:  # an existing workspace: say what this source changed in it
         typer.echo(added_text(opened, source, before, added))
     serve(
         opened,
         StudioConfig(host=host, port=port, annotator=annotator or default_annotator(), token=token),
-        model=choose_model(model, no_model, precision=loop_precision or None, warn=_warn),
+        model=chosen,
         precision=loop_precision or None,
-        trainer=None if no_trainer else TrainerOptions.checked(retrain_every, base, min_held_out),
+        trainer=trainer,
         started=process_start(),
     )
 
@@ -220,14 +225,17 @@ def import_(
     store: StoreOpt = None,
 ) -> None:
     """Add exported labels (.jsonl or .csv) to a workspace or team store; the newer label wins."""
-    from vgm_studio.labels.opening import open_store
-    from vgm_studio.labels.transfer import import_labels
+    from vgm_studio.labels.opening import store_to_fill
+    from vgm_studio.labels.transfer import read_label_file
 
     folder, url = store_location(workspace, store, None)
-    opened = open_store(folder, url)
-    for path in files:
-        edges, labels = import_labels(opened, path)
-        typer.echo(f"{path}: {labels} labels added or updated, {edges} new edges")
+    # Every file is read and checked before the workspace is opened (or made): a bad row
+    # leaves no store behind and changes none.
+    read = [read_label_file(path) for path in files]
+    with store_to_fill(folder, url) as opened:
+        for labels_file in read:
+            edges, labels = labels_file.write_to(opened)
+            typer.echo(f"{labels_file.path}: {labels} labels added or updated, {edges} new edges")
 
 
 def agreement(workspace: WorkspaceOpt) -> None:
