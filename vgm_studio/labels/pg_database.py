@@ -343,6 +343,10 @@ class PgDatabase:
         row = self._conn.execute("SELECT pg_try_advisory_lock(%s, %s)", key).fetchone()
         return bool(row and row[0])
 
+    def unlock(self, key: tuple[int, int]) -> None:
+        """Lets go of a session advisory lock ``try_lock`` took."""
+        self._conn.execute("SELECT pg_advisory_unlock(%s, %s)", key)
+
 
 def _first_line(exc: Exception) -> str:
     return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__

@@ -166,6 +166,13 @@ class PgLabelStore(LabelStore):
                 raise InputError(self.url, "another trainer is running on this label store")
             time.sleep(0.1)
 
+    def trainer_running(self) -> bool:
+        """Whether another process holds the trainer lock (taken and let go to find out)."""
+        if self._pg.try_lock(_TRAINER_LOCK):
+            self._pg.unlock(_TRAINER_LOCK)
+            return False
+        return True
+
 
 def _implements(store: PgLabelStore) -> LabelStore:
     """Never called: mypy checks the team store is a ``LabelStore`` (so a repository)."""

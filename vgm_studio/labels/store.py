@@ -20,6 +20,7 @@ from typing import Any
 
 from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.errors import InputError
+from vgm_studio.labels.claims import Claims
 from vgm_studio.labels.database import DB_NAME, HINT, Database, now
 from vgm_studio.labels.records import Event, LabelRecord, Predictions
 from vgm_studio.labels.repository import LabelRepository
@@ -46,6 +47,7 @@ class LabelStore:
     Attributes:
         versions: The workspace's model versions.
         trainer: The background trainer's state, requests and held-out split.
+        claims: Which unlabelled edges the studio servers on this workspace have handed out.
 
     Raises:
         InputError: The folder holds a database made by another version, or not by us.
@@ -65,6 +67,7 @@ class LabelStore:
         self._db = Database(self.path, durable, writable=create)
         self.versions = ModelVersions(self._db, self.workspace)
         self.trainer = TrainerTables(self._db)
+        self.claims = Claims(self._db)
 
     def close(self) -> None:
         self._db.close()

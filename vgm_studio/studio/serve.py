@@ -23,6 +23,7 @@ from vgm_studio.studio.app import Studio, StudioConfig
 from vgm_studio.studio.gate import is_loopback
 from vgm_studio.studio.panel import trainer_text
 from vgm_studio.trainer import PromotionWatcher, TrainerSupervisor, request_training
+from vgm_studio.trainer.lock import held_elsewhere
 from vgm_studio.workspace import predict_workspace
 
 EXPOSED = (
@@ -70,15 +71,25 @@ def _warn(line: str) -> None:
 def _start_trainer(studio: Studio, options: TrainerOptions) -> Callable[[], None]:
     """Starts the trainer process and the watcher that brings its versions to the app.
 
+    When another studio's trainer (or one started alone) already runs on the store, the
+    supervisor starts none and this studio shows that trainer's versions; it starts its own
+    once that one ends.
+
     Returns:
         A function that stops both.
     """
+    url = store_url(studio.store)
+    if held_elsewhere(studio.store.workspace, url):
+        _say(
+            "  trainer: another one runs on this workspace already; this studio uses it "
+            "(and starts its own if that one ends)"
+        )
     supervisor = TrainerSupervisor(
         studio.store.workspace,
         options.retrain_every,
         options.base,
         extra_args=["--min-held-out", str(options.min_held_out)],
-        url=store_url(studio.store),
+        url=url,
     )
     watcher = PromotionWatcher(
         studio.store,

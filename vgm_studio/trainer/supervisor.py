@@ -2,7 +2,9 @@
 
 The app must outlive its trainer, so nothing here raises into the caller: a trainer that cannot
 start or keeps dying is reported in the store (state ``crashed``) and in the trainer's log file,
-and restarted after a growing pause.
+and restarted after a growing pause. While another trainer runs on the store (a second studio
+on the same workspace, or ``vgm-studio trainer`` alone) it starts none and crashes nothing: the
+running trainer serves every studio of the store, and this one takes over when it ends.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from vgm_studio.labels.opening import open_store
+from vgm_studio.trainer.lock import held_elsewhere
 
 LOG_NAME = "trainer.log"
 
@@ -31,6 +34,8 @@ class Backoff:
     first: float = 1.0
     longest: float = 60.0
     healthy: float = 60.0
+    # How often to look again while another process's trainer runs.
+    standby: float = 5.0
 
     def pause(self, failures: int) -> float:
         return float(min(self.first * 2 ** max(failures - 1, 0), self.longest))
@@ -83,6 +88,8 @@ class TrainerSupervisor:
             *extra_args,
         ]
         self.restarts = 0
+        # True while another process's trainer serves the store and this one waits.
+        self.standing_by = False
         self._proc: subprocess.Popen[bytes] | None = None
         self._stopping = threading.Event()
         self._thread: threading.Thread | None = None
@@ -127,16 +134,34 @@ class TrainerSupervisor:
     def _watch(self) -> None:
         failures = 0
         while not self._stopping.is_set():
+            if self._stand_by():
+                continue
             started = time.monotonic()
             code = self._run_once()
             if self._stopping.is_set():
                 break
+            if code != 0 and held_elsewhere(self.workspace, self.url):
+                continue  # another studio's trainer took the lock first: not a crash
             failures = 1 if time.monotonic() - started >= self.backoff.healthy else failures + 1
             pause = self.backoff.pause(failures)
             self._crashed(f"trainer exited with {code}; restarting in {pause:.1f} s")
             self._stopping.wait(pause)
             if not self._stopping.is_set():
                 self.restarts += 1
+
+    def _stand_by(self) -> bool:
+        """Waits a while when another trainer serves the store; says whether it did."""
+        elsewhere = held_elsewhere(self.workspace, self.url)
+        if elsewhere != self.standing_by:
+            self._note(
+                "supervisor: another trainer runs on this store; using it"
+                if elsewhere
+                else "supervisor: no other trainer runs on this store; starting one"
+            )
+        self.standing_by = elsewhere
+        if elsewhere:
+            self._stopping.wait(self.backoff.standby)
+        return elsewhere
 
     def _run_once(self) -> int | None:
         """Runs the trainer until it exits; returns its exit code (None: it never started)."""

@@ -11,7 +11,6 @@ It runs beside the app on a shared CPU, so it uses one torch thread and a lower 
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import os
 import time
 from collections.abc import Callable
@@ -22,7 +21,6 @@ from typing import Any
 import numpy as np
 import torch
 
-from vgm_studio.errors import InputError
 from vgm_studio.labels.opening import open_store
 from vgm_studio.labels.records import NewVersion
 from vgm_studio.labels.store import LabelStore
@@ -32,6 +30,7 @@ from vgm_studio.model.validator import Validator
 from vgm_studio.trainer import registry
 from vgm_studio.trainer.dataset import BaseSet, SampleCache, TrainingSet, training_set
 from vgm_studio.trainer.fit import FitConfig, FitResult, fit, payload, write_checkpoint
+from vgm_studio.trainer.lock import take_lock
 from vgm_studio.trainer.promotion import Contest, PromotionRule, Scored, verdict
 
 
@@ -97,7 +96,7 @@ class Worker:
         self.parent_pid = parent_pid
         self.store = open_store(workspace, url, create=False, durable=False)
         # A team store's lock lives in the database, so trainers on other hosts see it too.
-        self._lock = _take_lock(self.store.workspace) if url is None else _team_lock_of(self.store)
+        self._lock = take_lock(self.store.workspace) if url is None else _team_lock_of(self.store)
         context = config.fit.context
         self.cache = SampleCache(self.store, context)
         self.base = BaseSet.read(config.base, config.held_out, config.fit.seed, context)
@@ -330,16 +329,3 @@ def _team_lock_of(store: LabelStore) -> LabelStore:
     connection, so a killed trainer on any host leaves none behind."""
     store.trainer_lock()  # type: ignore[attr-defined]
     return store  # the lock is held as long as the store's connection
-
-
-def _take_lock(workspace: Path) -> Any:
-    """An exclusive lock on the workspace's trainer; the kernel frees it when the process dies."""
-    folder = workspace / registry.MODELS_DIR
-    folder.mkdir(parents=True, exist_ok=True)
-    handle = (folder / ".trainer.lock").open("a+")
-    try:
-        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        handle.close()
-        raise InputError(workspace, "another trainer is running on this workspace") from None
-    return handle
