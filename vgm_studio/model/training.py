@@ -32,7 +32,15 @@ from vgm_studio.model.score import ScoreModel
 from vgm_studio.model.validator import input_spec, pick_device
 from vgm_studio.vgm.grid import VGMParams
 
+# Labelled edges of each class a run needs. A share of each class is held out (--val-fraction,
+# 0.15): early stopping, the p(success) cut and the reported figures are all read there, and
+# with fewer than 10 a class has at most one validation edge (round(0.15 × 9) = 1), so one
+# edge would decide the cut and the figures; with none (3 labels) there is nothing to read
+# them from at all, and the run trains every epoch for figures that cannot exist.
+MIN_PER_CLASS = 10
+
 __all__ = [
+    "MIN_PER_CLASS",
     "LabelledSet",
     "TrainConfig",
     "choose_threshold",
@@ -184,7 +192,13 @@ def _subset(
 def _split(
     data: LabelledSet, config: TrainConfig
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], dict[str, dict[str, int]]]:
-    """Rows to train and validate on, and how many of each class each holds."""
+    """Rows to train and validate on, and how many of each class each holds.
+
+    Raises:
+        InputError: Fewer than ``MIN_PER_CLASS`` edges of a class, or a training split
+            without both classes.
+    """
+    check_enough(data)
     train_idx, val_idx = stratified_split(
         data.labels, data.groups, config.val_fraction, config.seed
     )
@@ -197,6 +211,27 @@ def _split(
         for name, idx in (("train", train_idx), ("validation", val_idx))
     }
     return train_idx, val_idx, counts
+
+
+def check_enough(data: LabelledSet) -> None:
+    """Refuses labelled edges too few to train on and judge (``MIN_PER_CLASS`` a class).
+
+    Raises:
+        InputError: Naming the file (or how many) and the counts.
+    """
+    success = int(data.labels.sum())
+    failure = len(data.labels) - success
+    if min(success, failure) >= MIN_PER_CLASS:
+        return
+    paths = [str(f["path"]) for f in data.files]
+    where = paths[0] if len(paths) == 1 else None
+    held = "" if where else (f"{len(paths)} files: " if paths else "the edges: ")
+    raise InputError(
+        where,
+        f"{held}{success} success and {failure} failure edges; training needs at least "
+        f"{MIN_PER_CLASS} of each (a share of each class is held out to stop early, choose "
+        "the p(success) cut and give the figures): label more edges",
+    )
 
 
 def train(

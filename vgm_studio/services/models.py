@@ -37,13 +37,36 @@ def train_model(edges: list[Path], out: Path, config: TrainConfig, warn: Say = q
 
 
 def trained_line(out: Path, checkpoint: Checkpoint) -> str:
-    """One line on a checkpoint just written."""
-    m = {"accuracy": math.nan, "f1": math.nan, "auc": math.nan, **checkpoint.metrics}
-    return (
-        f"wrote {out} ({checkpoint.training['seconds']:.0f} s); validation: "
-        f"accuracy {m['accuracy']:.3f}, F1 {m['f1']:.3f}, AUC {m['auc']:.3f} "
-        f"at p(success) ≥ {checkpoint.threshold:.2f}"
-    )
+    """One line on a checkpoint just written; a figure its validation split cannot give is
+    "n/a", with the reason."""
+    held = checkpoint.training.get("counts", {}).get("validation", {})
+    cut = f"at p(success) ≥ {checkpoint.threshold:.2f}"
+    m = checkpoint.metrics
+    if not m:
+        # Nothing held out (--val-fraction 0, or each log too few of a class to spare one).
+        figures = "n/a (no edge was held out for validation; raise --val-fraction)"
+        cut = f"at the default p(success) ≥ {checkpoint.threshold:.2f}"
+    else:
+        figures = (
+            f"accuracy {shown(m.get('accuracy'))}, F1 {shown(m.get('f1'))}, "
+            f"AUC {shown(m.get('auc'))}"
+        )
+        missing = [c for c in ("success", "failure") if held and not held.get(c)]
+        if missing:
+            figures += f" (n/a: the validation split holds no {missing[0]} edge)"
+    return f"wrote {out} ({checkpoint.training['seconds']:.0f} s); validation: {figures} {cut}"
+
+
+def shown(value: Any, digits: int = 3) -> str:
+    """A figure as printed: ``n/a`` where it is missing or not a finite number, never nan."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        return "n/a"
+    return f"{value:.{digits}f}"
+
+
+def finite_or_none(doc: dict[str, Any]) -> dict[str, Any]:
+    """``doc`` with NaN and ±inf as None: JSON has no NaN, and a reader should see no figure."""
+    return {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in doc.items()}
 
 
 def evaluate_model(
@@ -62,7 +85,7 @@ def evaluate_model(
     m = binary_metrics(data.labels, probs, validator.threshold)
     if json_out is not None:
         record = {
-            **m,
+            **finite_or_none(m),
             "model": validator.name,
             "threshold": validator.threshold,
             "seconds": seconds,
@@ -78,15 +101,21 @@ def evaluate_model(
 
 
 def format_metrics(name: str, m: dict[str, Any], threshold: float, seconds: float) -> str:
-    """The paper's table layout: the rates, then the confusion counts."""
+    """The paper's table layout: the rates, then the confusion counts; "n/a" and why for a
+    figure these edges cannot give."""
+    success, failure = m["tp"] + m["fn"], m["tn"] + m["fp"]
+    auc = shown(m["auc"], 4)
+    if auc == "n/a":
+        only = "success" if success else "failure"
+        auc += f" (needs both classes; these edges are all {only})"
     rows = [
         f"model      {name}  (success = positive, p(success) ≥ {threshold:.2f})",
-        f"edges      {m['n']}  ({m['tp'] + m['fn']} success, {m['tn'] + m['fp']} failure)",
-        f"accuracy   {m['accuracy']:.4f}",
-        f"precision  {m['precision']:.4f}",
-        f"recall     {m['recall']:.4f}",
-        f"F1         {m['f1']:.4f}",
-        f"ROC AUC    {m['auc']:.4f}",
+        f"edges      {m['n']}  ({success} success, {failure} failure)",
+        f"accuracy   {shown(m['accuracy'], 4)}",
+        f"precision  {shown(m['precision'], 4)}",
+        f"recall     {shown(m['recall'], 4)}",
+        f"F1         {shown(m['f1'], 4)}",
+        f"ROC AUC    {auc}",
         "",
         "                 predicted success  predicted failure",
         f"true success     TP {m['tp']:>14}  FN {m['fn']:>14}",

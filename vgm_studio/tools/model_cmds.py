@@ -113,7 +113,12 @@ def train(
         typer.Option(metavar="MODEL.pt", help="Start from this checkpoint's weights (same model)."),
     ] = None,
 ) -> None:
-    """Train a validator on labelled edges (ambiguous and unlabelled ones are left out)."""
+    """Train a validator on labelled edges (ambiguous and unlabelled ones are left out).
+
+    Needs at least 10 edges labelled success and 10 labelled failure: a share of each class
+    (--val-fraction) is held out, and early stopping, the p(success) cut and the figures are
+    read there.
+    """
     from vgm_studio.model.context import DEFAULT_CONTEXT, Context
     from vgm_studio.model.training import TrainConfig
     from vgm_studio.services.models import train_model
