@@ -15,7 +15,7 @@ from vgm_studio.core import se2
 from vgm_studio.graph.metrics import RelationSampling, reference_relations, relation_errors
 from vgm_studio.graph.pose_graph import GraphEdge
 from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
-from vgm_studio.slam.consistency import Loop, _cycle, consistent
+from vgm_studio.slam.consistency import Loop, consistent, cycle_chi2
 from vgm_studio.slam.loop_search import unclosed_candidates, window_candidates
 from vgm_studio.slam.uncertainty import UncertaintyGraph
 
@@ -365,7 +365,7 @@ def test_of_two_equally_heavy_groups_the_one_that_agrees_best_is_kept(slid_first
     ends = [10, 12, 100, 102]
     rel = dict(zip(ends, graph.relative(ends, len(truth)), strict=True))
     gate = float(chi2.ppf(ConsistencyConfig().probability, 3))
-    assert _cycle(first, slid, truth, rel) < gate < _cycle(right, slid, truth, rel)
+    assert cycle_chi2(first, slid, truth, rel) < gate < cycle_chi2(right, slid, truth, rel)
     # networkx would take whichever group its node order finds first.
     names = ("first", "slid", "right") if slid_first else ("first", "right", "slid")
     loops = [{"first": first, "right": right, "slid": slid}[n] for n in names]

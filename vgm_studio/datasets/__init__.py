@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from vgm_studio.datasets.carmen import read_carmen
+from vgm_studio.datasets.g2o import graph_log, looks_like_graph, read_graph
 from vgm_studio.datasets.mount import mount_from_options
 from vgm_studio.datasets.options import ReadOptions
 from vgm_studio.datasets.scans import Scan, ScanLog, with_mount
@@ -14,7 +15,8 @@ __all__ = ["ReadOptions", "Scan", "ScanLog", "open_log"]
 
 
 def open_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
-    """Reads a CARMEN log (a file) or a ROS bag (a ``.bag`` file or a ROS 2 bag folder).
+    """Reads a CARMEN log (a file), a ROS bag (a ``.bag`` file or a ROS 2 bag folder) or the
+    scans of a g2o pose graph (``ROBOTLASER1`` after each vertex; ``datasets.g2o``).
 
     The laser's mount in ``options`` places the scans in the base frame. A CARMEN log's pose
     fields are the laser's pose (ROBOTLASER1 says so; CARMEN writes FLASER's the same way), so
@@ -28,6 +30,8 @@ def open_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
         from vgm_studio.datasets.rosbag import read_rosbag
 
         return read_rosbag(path, options)
+    if looks_like_graph(path):
+        return graph_log(read_graph(path))
     log = read_carmen(path, options)
     if options is None:
         return log

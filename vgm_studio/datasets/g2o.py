@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -32,7 +32,7 @@ from vgm_studio.core.hashing import content_hash
 from vgm_studio.datasets.carmen import format_robotlaser
 from vgm_studio.datasets.carmen_lines import LineParser, RawScan, parse_robotlaser, quote_token
 from vgm_studio.datasets.mount import LaserMount
-from vgm_studio.datasets.scans import Scan
+from vgm_studio.datasets.scans import Scan, ScanLog
 from vgm_studio.errors import InputError
 
 GraphFormat = Literal["g2o", "toro"]
@@ -253,7 +253,7 @@ def _vertex_scan(index: int, raw: RawScan, pose: NDArray[np.float64]) -> Scan:
     assert raw.max_range is not None
     laser, robot = raw.pose, raw.robot_pose if raw.robot_pose is not None else raw.pose
     offset = se2.between(robot, laser)
-    mount = LaserMount(*map(float, offset))
+    mount = LaserMount(float(offset[0]), float(offset[1]), float(offset[2]))
     return Scan(
         index=index,
         timestamp=raw.timestamp,
@@ -360,6 +360,25 @@ def _num(value: float) -> str:
     return f"{float(value):.9g}"
 
 
-def with_scans(graph: PoseGraphFile, scans: Sequence[Scan]) -> PoseGraphFile:
-    """The graph with one scan per vertex from elsewhere (a log or bag)."""
-    return replace(graph, scans=list(scans))
+def graph_log(graph: PoseGraphFile) -> ScanLog:
+    """A graph's scans as a log, one per vertex, with the vertices' poses as odometry: what
+    ``open_log`` gives for a graph file, so that the studio, ``info`` and ``audit`` read a
+    g2o file's scans as they read a CARMEN log's.
+
+    Raises:
+        InputError: The graph carries no scans.
+    """
+    if graph.scans is None:
+        raise InputError(
+            graph.path,
+            "is a pose graph without scans (no ROBOTLASER1 lines): the scans are in the log "
+            "or bag its SLAM read",
+        )
+    return ScanLog(
+        path=graph.path,
+        format=graph.format,
+        scans=list(graph.scans),
+        content_hash=graph.content_hash,
+        pose_source="odometry",
+        message_counts={"VERTEX_SE2": len(graph), "ROBOTLASER1": len(graph.scans)},
+    )

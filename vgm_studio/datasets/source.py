@@ -135,6 +135,24 @@ def read_slam_source(
             relations that match no scan pair.
     """
     source = read_log(log_path, options, relations_go_to="--relations")
+    attach_reference(source, options, reference, relations, join)
+    return source
+
+
+def attach_reference(
+    source: LogSource,
+    options: ReadOptions,
+    reference: Path | None = None,
+    relations: Path | None = None,
+    join: JoinOptions | None = None,
+) -> None:
+    """Joins a reference log's poses to ``source``'s scans and matches a relations file to
+    them, as a SLAM run is scored (``read_slam_source``; ``audit`` too, on a graph's scans).
+
+    Raises:
+        InputError: A relations file where a log is due or the other way round, or
+            relations that match no scan pair.
+    """
     if relations is not None:
         if relations.is_file() and not looks_like_relations(relations):
             raise InputError(
@@ -150,7 +168,6 @@ def read_slam_source(
                 "log with TRUEPOS (relations go to --relations)",
             )
         _join_reference(source, reference, join or JoinOptions(), options)
-    return source
 
 
 def _join_reference(

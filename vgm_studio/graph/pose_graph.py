@@ -87,10 +87,14 @@ def _pose(p: NDArray[np.float64]) -> gtsam.Pose2:
 
 
 def _graph(
-    edges: Sequence[GraphEdge], origin: NDArray[np.float64], robust: RobustName, config: GraphConfig
+    edges: Sequence[GraphEdge],
+    origin: NDArray[np.float64],
+    robust: RobustName,
+    config: GraphConfig,
+    anchor: int = 0,
 ) -> gtsam.NonlinearFactorGraph:
     graph = gtsam.NonlinearFactorGraph()
-    graph.add(gtsam.PriorFactorPose2(0, _pose(origin), _PRIOR))
+    graph.add(gtsam.PriorFactorPose2(anchor, _pose(origin), _PRIOR))
     for e in edges:
         graph.add(
             gtsam.BetweenFactorPose2(e.a, e.b, _pose(e.measurement), _noise(e, robust, config))
@@ -118,14 +122,16 @@ def optimize(
     edges: Sequence[GraphEdge],
     config: GraphConfig,
     robust: RobustName | None = None,
+    anchor: int = 0,
 ) -> OptimizeResult:
     """Optimises the keyframe poses from ``initial`` under ``edges``.
 
     Args:
-        initial: (N, 3) initial keyframe poses; keyframe 0 stays where it is.
+        initial: (N, 3) initial keyframe poses; keyframe ``anchor`` stays where it is.
         edges: The factors; every keyframe should be reachable through them.
         config: Noise floors and robust settings.
         robust: Overrides ``config.robust``.
+        anchor: The keyframe that fixes the map's frame (a graph file's ``FIX``).
 
     Returns:
         The optimised poses and, for GNC, each edge's final weight.
@@ -133,7 +139,9 @@ def optimize(
     robust = robust or config.robust
     count = len(initial)
     # GNC wants plain Gaussian factors: it weights them itself.
-    graph = _graph(edges, initial[0], "none" if robust == "gnc" else robust, config)
+    graph = _graph(
+        edges, initial[anchor], "none" if robust == "gnc" else robust, config, anchor
+    )
     values = _values(initial)
     lm = gtsam.LevenbergMarquardtParams()
     lm.setMaxIterations(100)

@@ -105,7 +105,7 @@ def consistent(
             votes.add_edge(_LIKELY, i, chi2=fit)
     for i in range(len(loops)):
         for j in range(i + 1, len(loops)):
-            cycle = _cycle(loops[i], loops[j], poses, rel)
+            cycle = cycle_chi2(loops[i], loops[j], poses, rel)
             if cycle <= gate:
                 votes.add_edge(i, j, chi2=cycle)
     members = {i for i in _heaviest(votes) if i not in _ESTIMATE}
@@ -240,8 +240,11 @@ def _fits_estimate(loop: Loop, poses: NDArray[np.float64], rel: Relative) -> flo
     return _mahalanobis(error, vt + rel.position_var[loop.b], vr + rel.heading_var[loop.b])
 
 
-def _cycle(one: Loop, two: Loop, poses: NDArray[np.float64], rel: dict[int, Relative]) -> float:
-    """Squared Mahalanobis distance of the cycle two loops close with the graph."""
+def cycle_chi2(
+    one: Loop, two: Loop, poses: NDArray[np.float64], rel: dict[int, Relative]
+) -> float:
+    """Squared Mahalanobis distance of the cycle two loops close with the graph; ``rel``
+    holds the graph's uncertainty seen from ``one``'s two ends."""
     chain_b = se2.between(poses[one.b], poses[two.b])
     chain_a = se2.between(poses[one.a], poses[two.a])
     # b₂ in a₁'s frame, once through loop one, once through loop two.

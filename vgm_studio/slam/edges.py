@@ -14,9 +14,9 @@ from vgm_studio.matching.matcher import MatchResult
 
 SlamEdgeKind = Literal["sequential", "loop"]
 # Where a candidate came from: odometry (sequential edges), the uncertainty window around the
-# estimate, place recognition, the final sweep on the last estimate, or a deliberately false
-# loop (``--inject-false-loops``).
-EdgeSource = Literal["odometry", "window", "place", "sweep", "injected"]
+# estimate, place recognition, the final sweep on the last estimate, a deliberately false
+# loop (``--inject-false-loops``), or another SLAM's graph file (``audit``).
+EdgeSource = Literal["odometry", "window", "place", "sweep", "injected", "graph"]
 # The sources of real loops, as the JSON, the fleet table and the maps count them.
 LOOP_SOURCES: tuple[EdgeSource, ...] = ("window", "place", "sweep")
 # Loops searched for around the estimate (online or in the final sweep): matched in the

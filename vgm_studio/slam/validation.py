@@ -22,7 +22,7 @@ from vgm_studio.datasets.scans import Scan
 from vgm_studio.errors import InputError
 from vgm_studio.matching.matcher import MatchResult
 from vgm_studio.matching.reference_labels import reference_label
-from vgm_studio.model.context import LocalMapper
+from vgm_studio.model.context import LocalMapper, Placements
 from vgm_studio.model.features import sample_from_scans
 from vgm_studio.model.registry import VALIDATOR_MODELS
 from vgm_studio.slam.config import ValidationConfig
@@ -45,12 +45,15 @@ class LocalMaps:
         keyframes: Each keyframe's index in the log.
         ahead: Place the keyframes' neighbours in a helper process ahead of need
             (``slam/placing.py``): the same maps, sooner where a core is free.
+        placed: Neighbours' poses matched already, (centre, neighbour) → pose in the
+            centre's frame (None: the match did not hold); the rest are matched on demand.
     """
 
     scans: Sequence[Scan]
     poses: NDArray[np.float64]
     keyframes: NDArray[np.int64]
     ahead: bool = False
+    placed: Placements | None = None
 
 
 class EdgeValidator:
@@ -94,6 +97,8 @@ class EdgeValidator:
                 self.model.require_single_scans("this run")
             else:
                 mapper = LocalMapper(local.scans, local.poses, self.model.context)
+                if local.placed is not None:
+                    mapper.adopt(local.placed)
                 self._maps = (mapper, local.keyframes)
                 if local.ahead:
                     self._ahead = PlacingAhead(mapper, local.keyframes)

@@ -1,0 +1,203 @@
+"""The loops the validator passed, checked as a group (``slam.consistency``'s PCM), the way
+the front end of ``slam`` checks its own: along the graph's sequential chain, a block of
+vertices at a time, each block's kept loops closed into the estimate before the next.
+
+The chain is the graph's sequential edges, each with its own covariance plus the floors of
+``GraphConfig`` (a graph that claims millimetres would make every cycle test fail on noise).
+A sequential edge the validator flagged stays in the chain at the width of an odometry
+step (``GraphConfig.odometry_sigma_*``); consecutive vertices no sequential edge joins are
+tied by the graph's own estimate at a width that says nothing.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2
+
+from vgm_studio.core import se2
+from vgm_studio.graph.config import GraphConfig
+from vgm_studio.graph.pose_graph import GraphEdge, RunningEstimate
+from vgm_studio.slam.config import ConsistencyConfig
+from vgm_studio.slam.consistency import Loop, consistent, cycle_chi2
+from vgm_studio.slam.edges import SlamEdge
+from vgm_studio.slam.uncertainty import UncertaintyGraph
+
+# A tie between consecutive vertices that no sequential edge joins: present so the chain is
+# one graph, too wide to say anything of where the vertex is.
+_UNTIED = np.diag([100.0**2, 100.0**2, math.pi**2])
+
+
+def floored(covariance: NDArray[np.float64], config: GraphConfig) -> NDArray[np.float64]:
+    """A graph file's covariance plus the floors every edge of ``slam`` carries."""
+    floor = [config.min_sigma_xy**2] * 2 + [math.radians(config.min_sigma_theta_deg) ** 2]
+    return np.asarray(covariance, dtype=np.float64) + np.diag(floor)
+
+
+def widened(edge: SlamEdge, config: GraphConfig) -> NDArray[np.float64]:
+    """The covariance of a flagged sequential edge: an odometry step's, over its length."""
+    step = float(math.hypot(edge.guess[0], edge.guess[1]))
+    sxy = config.min_sigma_xy + config.odometry_sigma_xy * step
+    return np.diag([sxy**2, sxy**2, math.radians(config.odometry_sigma_theta_deg) ** 2])
+
+
+def chain(
+    edges: Sequence[SlamEdge],
+    covariances: Sequence[NDArray[np.float64]],
+    poses: NDArray[np.float64],
+    config: GraphConfig,
+) -> list[GraphEdge]:
+    """The sequential chain as the group check reads it (see the module's docstring)."""
+    out: list[GraphEdge] = []
+    joined = set()
+    for e, cov in zip(edges, covariances, strict=True):
+        if e.kind != "sequential":
+            continue
+        width = floored(cov, config) if e.validated else widened(e, config)
+        out.append(GraphEdge(e.a, e.b, e.guess, width, known_inlier=True))
+        joined.add(e.b)
+    for k in range(1, len(poses)):
+        if k not in joined:
+            out.append(GraphEdge(k - 1, k, se2.between(poses[k - 1], poses[k]), _UNTIED, True))
+    return out
+
+
+def dead_reckoning(links: Sequence[GraphEdge], count: int) -> NDArray[np.float64]:
+    """Poses composed along the chain from vertex 0 (each vertex from the one before it)."""
+    step = {e.b: e for e in links if e.b == e.a + 1}
+    poses = np.zeros((count, 3))
+    for k in range(1, count):
+        poses[k] = se2.compose(poses[k - 1], step[k].measurement)
+    return poses
+
+
+def check_loops(
+    edges: Sequence[SlamEdge],
+    covariances: Sequence[NDArray[np.float64]],
+    poses: NDArray[np.float64],
+    graph: GraphConfig,
+    config: ConsistencyConfig,
+    block: int,
+    support: tuple[int, int] = (2, 10),
+    unsure: Sequence[bool] | None = None,
+) -> dict[int, int]:
+    """Sets ``consistency`` and ``kept`` of the loops the validator passed, then keeps the
+    loops it failed that enough kept loops near them agree with (``rescue``).
+
+    Args:
+        edges: Every edge, sequential and loop, with ``a < b``, its measurement as ``guess``
+            and the validator's decision.
+        covariances: Each edge's covariance as its graph gave it.
+        poses: (V, 3) the graph's own estimate, for the vertices no sequential edge joins.
+        graph: Floors and the width of flagged steps.
+        config: The check's gate, vote and support.
+        block: Vertices per block.
+        support: (how many, within how many vertices at both ends) for ``rescue``.
+        unsure: Per edge, the validator passed it without being sure (under its loop cut,
+            or scans that share too little view to judge): such a loop must have loops near
+            it that agree (``ConsistencyConfig.min_support``), as a place-recognition loop
+            must in ``slam``. Where the chain is long and uncertain, a lone loop fits any
+            estimate: one unverifiable false loop kept so on the Killian Court graph bent
+            the map under a revisit of 20 right loops, which the check then rejected.
+
+    Returns:
+        For each loop kept by ``rescue``, by index in ``edges``, the loops that agree with it.
+    """
+    if not config.enabled:
+        return {}
+    links = chain(edges, covariances, poses, graph)
+    start = dead_reckoning(links, len(poses))
+    estimate = RunningEstimate(start[0], graph)
+    uncertainty = UncertaintyGraph()
+    for k in range(1, len(poses)):
+        estimate.add_keyframe(start[k])
+    for link in links:
+        estimate.add_edge(link)
+        uncertainty.add(link)
+    estimate.update()
+    loops = sorted(
+        (i for i, e in enumerate(edges) if e.kind == "loop" and e.validated),
+        key=lambda i: edges[i].b,
+    )
+    for first in range(0, len(poses), block):
+        chosen = [i for i in loops if first <= edges[i].b < first + block]
+        if not chosen:
+            continue
+        checked = [
+            Loop(
+                edges[i].a,
+                edges[i].b,
+                edges[i].guess,
+                floored(covariances[i], graph),
+                surprise=unsure is not None and unsure[i],
+            )
+            for i in chosen
+        ]
+        flags = consistent(checked, estimate.poses, uncertainty, config, drift=uncertainty)
+        closed = False
+        for i, loop, ok in zip(chosen, checked, flags, strict=True):
+            edges[i].consistency = "kept" if ok else "rejected"
+            edges[i].kept = bool(ok)
+            if ok:
+                factor = GraphEdge(loop.a, loop.b, loop.measurement, loop.covariance)
+                estimate.add_edge(factor)
+                uncertainty.add(factor)
+                closed = True
+        if closed:
+            estimate.update(extra_iterations=2)
+    gate = float(chi2.ppf(config.probability, 3))
+    failed = [i for i, e in enumerate(edges) if e.kind == "loop" and not e.validated]
+    # Support comes from the loops the group check kept and from the other failed loops: a
+    # revisit the validator is unsure of throughout still agrees with itself.
+    held = [i for i in loops if edges[i].kept] + failed
+
+    def loop_of(i: int) -> Loop:
+        e = edges[i]
+        return Loop(e.a, e.b, e.guess, floored(covariances[i], graph))
+
+    found = rescue(loop_of, failed, held, estimate.poses, uncertainty, gate, support)
+    for i in found:
+        edges[i].kept = True
+        edges[i].consistency = "kept"
+    return found
+
+
+def rescue(
+    loop_of: Callable[[int], Loop],
+    failed: Sequence[int],
+    held: Sequence[int],
+    poses: NDArray[np.float64],
+    uncertainty: UncertaintyGraph,
+    gate: float,
+    support: tuple[int, int],
+) -> dict[int, int]:
+    """The failed loops (``loop_of`` an edge index) that at least ``support[0]`` held loops
+    near them agree with.
+
+    Near means both ends within ``support[1]`` vertices, so the cycle between them runs
+    through a short stretch of the chain and the test says something: an injected loop
+    between two places 5 m apart meets no held loop whose cycle with it closes, since any
+    loop near both its ends says the places are where they are.
+    """
+    need, span = support
+    if need <= 0 or not failed or not held:
+        return {}
+    ends = sorted({x for i in failed for x in (loop_of(i).a, loop_of(i).b)})
+    rel = dict(zip(ends, uncertainty.relative(ends, len(poses)), strict=True))
+    others = [loop_of(j) for j in held]
+    a_of = np.array([o.a for o in others])
+    b_of = np.array([o.b for o in others])
+    out: dict[int, int] = {}
+    for i in failed:
+        one = loop_of(i)
+        near = np.flatnonzero((np.abs(a_of - one.a) <= span) & (np.abs(b_of - one.b) <= span))
+        near = near[[held[int(k)] != i for k in near]]
+        if len(near) < need:
+            continue
+        agree = sum(cycle_chi2(one, others[int(k)], poses, rel) <= gate for k in near)
+        if agree >= need:
+            out[i] = int(agree)
+    return out

@@ -1,0 +1,366 @@
+"""An audit: every edge of a graph judged from its scans, the loops checked as a group, and
+the graph optimised again without the edges flagged.
+
+The result is a ``SlamResult`` too (``AuditResult.run``): the vertices are its keyframes and
+the graph's edges its edges, so the maps, the recording, the relation errors and the edges
+file of ``slam`` serve the audit unchanged.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from tqdm import tqdm
+
+from vgm_studio.audit.config import AuditConfig
+from vgm_studio.audit.group import check_loops, widened
+from vgm_studio.audit.inject import false_loops
+from vgm_studio.audit.inputs import AuditInput
+from vgm_studio.audit.judge import Rematch, judge_pairs, shared_view
+from vgm_studio.core import se2
+from vgm_studio.datasets.g2o import G2oEdge, information_of
+from vgm_studio.datasets.scans import Scan
+from vgm_studio.graph.pose_graph import GraphEdge, optimize
+from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.model.context import DEFAULT_CONTEXT, Placements
+from vgm_studio.slam.edges import SlamEdge
+from vgm_studio.slam.pipeline import MIN_POINTS, SlamResult, dense_reference
+from vgm_studio.slam.validation import EdgeValidator, LocalMaps
+
+# Neighbours placed from the chain, in steps: past the Killian graph's 0.5 m spacing, two
+# neighbours a side within a local map's 2 m reach.
+_REACH = 4
+# Edges the validator reads at once: its batches fill, and the bar moves often enough.
+_CHUNK = 512
+# Ties consecutive vertices that no edge of a graph joins, so a graph whose flagged loops
+# held two parts together still solves; too wide to move anything.
+_UNTIED = np.diag([1e3**2, 1e3**2, 1e2**2])
+
+
+@dataclass
+class Verdict:
+    """What the audit made of one edge.
+
+    Attributes:
+        edge: The edge with the validator's and the group check's decisions.
+        covariance: (3, 3) its covariance as the graph gave it.
+        line: The line of the graph file it came from (0: injected).
+        reason: Why it was kept or flagged, for a person.
+        rematch: The matcher's answer from the measurement, where it was asked for.
+    """
+
+    edge: SlamEdge
+    covariance: NDArray[np.float64]
+    line: int
+    reason: str
+    rematch: Rematch | None = None
+
+    @property
+    def decision(self) -> str:
+        return "kept" if self.edge.kept else "flagged"
+
+
+@dataclass
+class AuditResult:
+    """An audit's decisions and graphs.
+
+    Attributes:
+        input: What was audited.
+        run: The graph as a SLAM run: ``before`` every edge, ``after`` the cleaned graph.
+        verdicts: One per edge, the graph's in file order, then the injected ones.
+        cleaned: The cleaned graph's edges, as a graph file writes them.
+        seconds: Wall time per stage.
+    """
+
+    input: AuditInput
+    run: SlamResult
+    verdicts: list[Verdict]
+    cleaned: list[G2oEdge]
+    seconds: dict[str, float]
+
+    @property
+    def judged_per_second(self) -> float:
+        """Edges judged (validator and group check) per second."""
+        spent = self.seconds.get("validator", 0.0) + self.seconds.get("consistency", 0.0)
+        return len(self.verdicts) / spent if spent > 0 else math.inf
+
+
+def forward(edge: G2oEdge) -> tuple[int, int, NDArray[np.float64], NDArray[np.float64]]:
+    """(a, b, z, Σ) with a < b: an edge written from the later vertex is turned round (its
+    covariance carried by the measurement's adjoint, in gtsam's convention)."""
+    cov = edge.covariance
+    if edge.a < edge.b:
+        return edge.a, edge.b, edge.measurement, cov
+    z = se2.inverse(edge.measurement)
+    c, s = math.cos(edge.measurement[2]), math.sin(edge.measurement[2])
+    adjoint = np.array(
+        [[c, -s, edge.measurement[1]], [s, c, -edge.measurement[0]], [0.0, 0.0, 1.0]]
+    )
+    return edge.b, edge.a, z, adjoint @ cov @ adjoint.T
+
+
+def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> AuditResult:
+    """Judges every edge of ``inp``'s graph and optimises it again without the flagged ones.
+
+    Raises:
+        InputError: The validator cannot be set up (a missing or foreign checkpoint).
+    """
+    seconds: dict[str, float] = {}
+    graph = inp.graph
+    anchor = graph.fixed or 0
+    t = time.perf_counter()
+    own = [forward(e) for e in graph.edges]
+    lines = [e.line for e in graph.edges]
+    scans = [dataclasses.replace(inp.log.scans[i], keep_points=True) for i in inp.vertex_scans]
+    matcher = ScanMatcher()
+    if config.inject.count:
+        estimate = optimize(graph.poses, _factors(own, len(graph)), config.graph, anchor=anchor)
+        drawn = [(e.a, e.b, e.measurement, e.covariance) for e in graph.edges]
+        for e in false_loops(estimate.poses, _edges(drawn), scans, config.inject, matcher):
+            own.append((e.a, e.b, e.measurement, e.covariance))
+            lines.append(0)
+    seconds["injecting"] = time.perf_counter() - t
+    t = time.perf_counter()
+    pairs = [(a, b, z) for a, b, z, _ in own]
+    matches, again = judge_pairs(matcher, scans, pairs, config.validation.thresholds)
+    seconds["matching"] = time.perf_counter() - t
+    edges = [
+        SlamEdge(
+            "sequential" if b == a + 1 else "loop",
+            a,
+            b,
+            z,
+            m,
+            injected=line == 0,
+            source="injected" if line == 0 else "graph",
+        )
+        for (a, b, z, _), m, line in zip(own, matches, lines, strict=True)
+    ]
+    t = time.perf_counter()
+    judgement = _judge(inp, config, scans, edges, again)
+    seconds["validator"] = time.perf_counter() - t
+    t = time.perf_counter()
+    covariances = [cov for _, _, _, cov in own]
+    rescued = check_loops(
+        edges,
+        covariances,
+        graph.poses,
+        config.graph,
+        config.consistency,
+        config.block,
+        (config.support, config.support_span),
+        [judgement.unsure(k, e) for k, e in enumerate(edges)],
+    )
+    seconds["consistency"] = time.perf_counter() - t
+    t = time.perf_counter()
+    before = optimize(graph.poses, _factors(own, len(graph)), config.graph, anchor=anchor)
+    kept = [_kept_factor(e, cov, config) for e, cov in zip(edges, covariances, strict=True)]
+    cleaned = [f for f in kept if f is not None]
+    after = optimize(graph.poses, _with_ties(cleaned, len(graph)), config.graph, anchor=anchor)
+    seconds["back_end"] = time.perf_counter() - t
+    reasons = _Reasons(judgement, rescued, scans)
+    verdicts = [
+        Verdict(e, cov, line, reasons(k, e), r)
+        for k, (e, cov, line, r) in enumerate(zip(edges, covariances, lines, again, strict=True))
+    ]
+    run = SlamResult(
+        keyframes=inp.vertex_scans,
+        odometry=inp.scan_poses,
+        edges=edges,
+        running=graph.poses,
+        before=before,
+        after=after,
+        threshold=judgement.threshold,
+        seconds=seconds,
+    )
+    written = [G2oEdge(f.a, f.b, f.measurement, information_of(f.covariance)) for f in cleaned]
+    return AuditResult(inp, run, verdicts, written, seconds)
+
+
+@dataclass
+class _Judgement:
+    """The validator's word on every edge, and what the audit read it against.
+
+    Attributes:
+        threshold: The checkpoint's threshold (NaN without a model).
+        cut: Under this p a pair's scans fail (``AuditConfig.flag_below``).
+        bar: The loop cut of validation: at or over it a loop is sure.
+        views: Each judged loop's shared view (``judge.shared_view``), by edge index.
+        min_view: Under this the scans cannot judge a loop.
+    """
+
+    threshold: float
+    cut: float
+    bar: float
+    views: dict[int, float]
+    min_view: float
+
+    def unsure(self, k: int, edge: SlamEdge) -> bool:
+        """A loop the validator passed without vouching for it."""
+        if edge.kind != "loop" or math.isnan(edge.p_success):
+            return False
+        return not edge.p_success >= self.bar or self.views.get(k, 1.0) < self.min_view
+
+
+def _judge(
+    inp: AuditInput,
+    config: AuditConfig,
+    scans: Sequence[Scan],
+    edges: Sequence[SlamEdge],
+    again: Sequence[Rematch],
+) -> _Judgement:
+    """Runs the validator over the edges it can judge and reads its p as an audit does: a
+    failure below the cut, where a loop's scans share enough view; else kept, for now."""
+    validator = _validator(inp, config, scans, _chain_placements(inp, edges, again))
+    judged = [k for k, e in enumerate(edges) if _judgeable(e, scans)]
+    bar = tqdm(total=len(judged), desc="judging edges", unit="edge", disable=None)
+    try:
+        for k in range(0, len(judged), _CHUNK):
+            chunk = [edges[i] for i in judged[k : k + _CHUNK]]
+            validator(chunk)
+            bar.update(len(chunk))
+    finally:
+        bar.close()
+        validator.close()
+    threshold = validator.threshold
+    cut = config.flag_below if config.flag_below is not None else threshold
+    loop_bar = validator.loop_bar
+    views: dict[int, float] = {}
+    if not math.isnan(cut):
+        margin = DEFAULT_CONTEXT.view_margin
+        for i in judged:
+            e = edges[i]
+            failed = e.p_success < cut
+            if e.kind == "loop":
+                views[i] = shared_view(scans[e.a], scans[e.b], e.estimate, margin)
+                failed = failed and views[i] >= config.min_shared_view
+            e.validated = e.kept = not failed
+    return _Judgement(
+        threshold, cut, math.nan if loop_bar is None else loop_bar, views, config.min_shared_view
+    )
+
+
+def _validator(
+    inp: AuditInput, config: AuditConfig, scans: Sequence[Scan], placed: Placements | None
+) -> EdgeValidator:
+    reference = dense_reference(inp.log, inp.scan_poses)
+    return EdgeValidator(
+        config.validation,
+        scans,
+        None if reference is None else reference[inp.vertex_scans],
+        LocalMaps(inp.log.scans, inp.scan_poses, inp.vertex_scans, placed=placed),
+    )
+
+
+def _chain_placements(
+    inp: AuditInput, edges: Sequence[SlamEdge], again: Sequence[Rematch]
+) -> Placements | None:
+    """Where a graph's own scans are the log, a vertex's neighbours in a local map are the
+    vertices next to it, and the re-matches of the sequential edges have placed them already:
+    each neighbour up to ``_REACH`` steps along, composed over steps that all held (as
+    ``LocalMapper.placed`` holds a match). It spares a match per neighbour, four per vertex."""
+    if not np.array_equal(inp.vertex_scans, np.arange(len(inp.log))):
+        return None
+    floor = DEFAULT_CONTEXT.min_inliers
+    step: dict[int, NDArray[np.float64] | None] = {}
+    for e, r in zip(edges, again, strict=True):
+        if e.kind == "sequential":
+            holds = r.converged and r.inlier_ratio >= floor
+            step[e.a] = r.match.estimate if holds else None
+    placed: Placements = {}
+    for k in range(len(inp.log)):
+        pose: NDArray[np.float64] | None = np.zeros(3)
+        for j in range(k + 1, min(k + 1 + _REACH, len(inp.log))):
+            s = step.get(j - 1)
+            pose = None if pose is None or s is None else se2.compose(pose, s)
+            placed[(k, j)] = pose
+            placed[(j, k)] = None if pose is None else se2.inverse(pose)
+    return placed
+
+
+def _judgeable(edge: SlamEdge, scans: Sequence[Scan]) -> bool:
+    return min(len(scans[edge.a].points()), len(scans[edge.b].points())) >= MIN_POINTS
+
+
+def _edges(
+    own: list[tuple[int, int, NDArray[np.float64], NDArray[np.float64]]],
+) -> list[G2oEdge]:
+    return [G2oEdge(a, b, z, information_of(cov)) for a, b, z, cov in own]
+
+
+def _factors(
+    own: list[tuple[int, int, NDArray[np.float64], NDArray[np.float64]]], count: int
+) -> list[GraphEdge]:
+    factors = [GraphEdge(a, b, z, cov, known_inlier=b == a + 1) for a, b, z, cov in own]
+    return _with_ties(factors, count)
+
+
+def _with_ties(factors: list[GraphEdge], count: int) -> list[GraphEdge]:
+    joined = {f.b for f in factors if f.b == f.a + 1}
+    ties = [
+        GraphEdge(k - 1, k, np.zeros(3), _UNTIED, known_inlier=True)
+        for k in range(1, count)
+        if k not in joined
+    ]
+    return factors + ties
+
+
+def _kept_factor(
+    edge: SlamEdge, covariance: NDArray[np.float64], config: AuditConfig
+) -> GraphEdge | None:
+    if edge.kept:
+        return GraphEdge(edge.a, edge.b, edge.guess, covariance, edge.kind == "sequential")
+    if edge.kind == "sequential":
+        # The chain stays whole: the step goes in at an odometry step's width.
+        return GraphEdge(edge.a, edge.b, edge.guess, widened(edge, config.graph), True)
+    return None
+
+
+class _Reasons:
+    """Why each edge was kept or flagged, in a line a person reads."""
+
+    def __init__(
+        self, judgement: _Judgement, rescued: dict[int, int], scans: Sequence[Scan]
+    ) -> None:
+        self._j, self._rescued, self._scans = judgement, rescued, scans
+
+    def __call__(self, k: int, e: SlamEdge) -> str:
+        j = self._j
+        if not _judgeable(e, self._scans):
+            fewest = min(len(self._scans[e.a].points()), len(self._scans[e.b].points()))
+            return f"not judged: a scan with {fewest} points"
+        if math.isnan(e.p_success):
+            return "kept: no validator" if e.kept else "flagged"
+        p = f"p {e.p_success:.2f}"
+        view = j.views.get(k)
+        if k in self._rescued:
+            return (
+                f"kept: the scans fail ({p} < {j.cut:.2f}), but {self._rescued[k]} loops near "
+                "it close consistent cycles with it"
+            )
+        if not e.validated:
+            if e.kind == "sequential":
+                return (
+                    f"validator: {p} < {j.cut:.2f}; kept in the chain at an odometry step's width"
+                )
+            return (
+                f"validator: {p} < {j.cut:.2f} with {view or 0:.0%} of the view shared, "
+                "and no loop near it agrees"
+            )
+        if e.consistency == "rejected":
+            return f"consistency: disagrees with the loops near it and the chain ({p})"
+        if e.kind == "sequential":
+            return f"kept: {p}"
+        if view is not None and view < j.min_view and e.p_success < j.cut:
+            return (
+                f"kept: the scans share {view:.0%} of their view, too little to judge ({p}); "
+                "consistent with the loops near it"
+            )
+        sure = "" if e.p_success >= j.bar else " (unsure)"
+        return f"kept: {p}{sure}; consistent with the loops near it"
