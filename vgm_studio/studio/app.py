@@ -13,8 +13,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import viser
 
-from vgm_studio.errors import InputError
 from vgm_studio.labels.agreement import agreement
+from vgm_studio.labels.records import Predictions
 from vgm_studio.labels.store import LabelStore
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
@@ -22,6 +22,7 @@ from vgm_studio.studio.config import StudioConfig, check_port_free, default_anno
 from vgm_studio.studio.gate import Gate, guarded_serve, is_loopback, new_token
 from vgm_studio.studio.panel import (
     agreement_text,
+    ask_training,
     build_panel,
     code,
     facts_text,
@@ -33,7 +34,7 @@ from vgm_studio.studio.queues import Queue, Snapshot, order
 from vgm_studio.studio.scene import Layers, TabScene
 from vgm_studio.studio.tab import Tab
 from vgm_studio.studio.team import StoreLink
-from vgm_studio.studio.view import EdgeView, ViewCache
+from vgm_studio.studio.view import ViewCache
 
 # Where commands have always imported them from.
 __all__ = ["Studio", "StudioConfig", "check_port_free", "default_annotator"]
@@ -67,6 +68,7 @@ class Studio:
         self._edge_ids = store.edge_ids()
         self._edges: dict[str, Edge] = {}
         self._predictions = store.predictions()
+        self._scoring: tuple[int, int] | None = None  # (done, total) while a model scores
         self._tabs: dict[int, Tab] = {}
         self._claims: dict[str, int] = {}
         self._lock = threading.RLock()
@@ -138,6 +140,18 @@ class Studio:
                     tab.order, tab.index = fresh, 0
                 self._show(tab, draw_scene=False)
 
+    def show_scores(self, scores: Predictions, progress: tuple[int, int] | None) -> None:
+        """Shows p(success) while a model scores the edges (``scoring.Scorer``), in every tab."""
+        self._predictions, self._scoring = scores, progress
+        for tab in list(self._tabs.values()):
+            with tab.lock:
+                self._show(tab, draw_scene=False)
+
+    def upcoming(self) -> list[str]:
+        """The edges the tabs show and show next, which a model scores first."""
+        tabs = list(self._tabs.values())
+        return [e for t in tabs for e in t.order[max(t.index, 0) : t.index + 1 + PREFETCH]]
+
     def show_trainer(self, text: str) -> None:
         """Shows the background trainer's state in every tab (called from the watcher)."""
         if text == self._trainer_text:
@@ -154,17 +168,6 @@ class Studio:
         text = f"**{plain(line)}**; labels already acknowledged are stored" if line else None
         for tab in list(self._tabs.values()):
             tab.panel.trainer.content = text or self._trainer_text
-
-    def _train_now(self, tab: Tab) -> None:
-        if self._train_now_callback is None:
-            tab.client.add_notification(
-                "No trainer", "This studio runs without one.", auto_close_seconds=3.0
-            )
-            return
-        self._train_now_callback()
-        tab.client.add_notification(
-            "Training asked for", "The trainer starts a new version.", auto_close_seconds=3.0
-        )
 
     # -- tabs ----------------------------------------------------------------------------
 
@@ -183,7 +186,7 @@ class Studio:
             "guess": lambda: self._toggle_guess(tab),
             "layers": lambda: self._cycle_layers(tab),
             "reset_view": lambda: tab.scene.reset_view(),
-            "train_now": lambda: self._train_now(tab),
+            "train_now": lambda: ask_training(tab.client, self._train_now_callback),
         }
 
     def _connect(self, client: viser.ClientHandle) -> None:
@@ -358,7 +361,7 @@ class Studio:
         edge = self._edge(edge_id)
         use_guess = bool(panel.show_guess.value)
         if draw_scene or tab.failed is not None:
-            view, tab.failed = self._view_or_reason(edge)
+            view, tab.failed = self._views.get_or_reason(edge)
             if view is None:
                 tab.scene.clear()
             else:
@@ -377,6 +380,7 @@ class Studio:
             self._predictions.threshold,
             use_guess,
             notes,
+            self._scoring,
         )
         if tab.failed is not None:
             facts = (
@@ -384,15 +388,6 @@ class Studio:
                 "Labels are refused for it; fix the log or press E for the next edge.\n\n" + facts
             )
         panel.facts.content = facts
-
-    def _view_or_reason(self, edge: Edge) -> tuple[EdgeView | None, str | None]:
-        """The edge's view, or None and one line on why its scans cannot be read."""
-        try:
-            return self._views.get(edge), None
-        except InputError as exc:
-            return None, str(exc)
-        except (OSError, ValueError) as exc:  # a log that changed under a running studio
-            return None, f"{type(exc).__name__} while reading the log of edge {edge.edge_id}"
 
     def _prefetch(self, tab: Tab) -> None:
         upcoming = tab.order[tab.index + 1 : tab.index + 1 + PREFETCH]

@@ -141,6 +141,19 @@ def _title(action: str) -> str:
     return _TITLES.get(action, action.capitalize())
 
 
+def ask_training(client: viser.ClientHandle, train_now: Callable[[], None] | None) -> None:
+    """The panel's "Train now": asks the trainer for a version, or says none runs."""
+    if train_now is None:
+        client.add_notification(
+            "No trainer", "This studio runs without one.", auto_close_seconds=3.0
+        )
+        return
+    train_now()
+    client.add_notification(
+        "Training asked for", "The trainer starts a new version.", auto_close_seconds=3.0
+    )
+
+
 def layers_text(layers: str) -> str:
     """The 3D view's legend and which layers show."""
     both = "in the same cell" if "raw" in layers else "within a beam spacing"
@@ -228,10 +241,12 @@ def facts_text(
     threshold: float,
     use_guess: bool,
     notes: dict[str, str] | None = None,
+    scoring: tuple[int, int] | None = None,
 ) -> str:
     """The edge's facts as a markdown table: matcher figures, model, reference, labels.
 
-    Every value read from the edge or the labels goes through ``plain``/``code``.
+    Every value read from the edge or the labels goes through ``plain``/``code``. While a
+    model scores the edges, ``scoring`` is (done, total): an edge not scored yet says so.
     """
     m = edge.match
     rows = [
@@ -247,7 +262,9 @@ def facts_text(
         rows.append(("iterations", f"{plain(m['iterations'])}, converged {converged}"))
     moved = se2.pose_error(edge.guess, edge.estimate)
     rows.append(("match moved guess", f"{100 * moved[0]:.1f} cm, {math.degrees(moved[1]):.1f}°"))
-    if p_success is None:
+    if p_success is None and scoring is not None:
+        rows.append(("p(success)", f"scoring {scoring[0]:,} / {scoring[1]:,}"))
+    elif p_success is None:
         rows.append(("p(success)", "no model"))
     else:
         says = "success" if p_success >= threshold else "failure"

@@ -22,9 +22,9 @@ from vgm_studio.labels.store import LabelStore
 from vgm_studio.studio.app import Studio, StudioConfig
 from vgm_studio.studio.gate import is_loopback
 from vgm_studio.studio.panel import trainer_text
+from vgm_studio.studio.scoring import Scorer
 from vgm_studio.trainer import PromotionWatcher, TrainerSupervisor, request_training
 from vgm_studio.trainer.lock import held_elsewhere
-from vgm_studio.workspace import predict_workspace
 
 EXPOSED = (
     "anyone who can reach {host}:{port} and has the address above (its token) can read and "
@@ -106,11 +106,18 @@ def _start_trainer(studio: Studio, options: TrainerOptions) -> Callable[[], None
     return stop
 
 
-def _predict_then_refresh(studio: Studio, model: Path, precision: float | None) -> None:
+def _score(studio: Studio, model: Path, precision: float | None) -> None:
+    """Scores the edges, those on screen first, and shows them as they come (``Scorer``)."""
+    scorer = Scorer(studio.store, model, studio.upcoming, studio.show_scores, precision=precision)
+    scorer.run()
+
+
+def _score_then_refresh(studio: Studio, model: Path, precision: float | None) -> None:
     try:
-        predict_workspace(studio.store, model, precision=precision)
+        _score(studio, model, precision)
     except Exception as exc:  # a failed model must not take the labeling down
         _warn(f"{model}: no predictions ({exc})")
+        studio.show_scores(studio.store.predictions(), None)
         return
     studio.refresh_predictions()
 
@@ -126,9 +133,10 @@ def serve(
 ) -> None:
     """Starts the studio (and the trainer beside it), says where, and serves until Ctrl-C.
 
-    The model's predictions are made in the background: the annotator can start at once, and
-    p(success) appears in the panel when they are ready. With ``precision`` the model's calls
-    are cut where its validation precision reaches it (``predict_workspace``). ``started``
+    The model's predictions are made in the background: the annotator can start at once; the
+    edges on screen are scored first, and the panel says how far scoring got. With
+    ``precision`` the model's calls are cut where its validation precision reaches it
+    (``scoring.Scorer``). ``started``
     (on ``time.perf_counter``'s clock) is when the wait began, for "ready N s after start".
     """
 
@@ -140,7 +148,7 @@ def serve(
     stop_trainer = _start_trainer(studio, trainer) if trainer is not None else None
     if model is not None:
         threading.Thread(
-            target=_predict_then_refresh,
+            target=_score_then_refresh,
             args=(studio, model, precision),
             daemon=True,
             name="predict",

@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vgm_studio.core import se2
+from vgm_studio.errors import InputError
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
 from vgm_studio.studio.heatmap import blend, channels_panel
@@ -222,6 +223,15 @@ class ViewCache:
             while len(self._views) > self._capacity:
                 self._views.popitem(last=False)
         return view
+
+    def get_or_reason(self, edge: Edge) -> tuple[EdgeView | None, str | None]:
+        """The edge's view, or None and one line on why its scans cannot be read."""
+        try:
+            return self.get(edge), None
+        except InputError as exc:
+            return None, str(exc)
+        except (OSError, ValueError) as exc:  # a log that changed under a running studio
+            return None, f"{type(exc).__name__} while reading the log of edge {edge.edge_id}"
 
     def _trajectory(self, edge: Edge) -> Trajectory | None:
         """The minimap's path of the edge's log, drawn once per log (under the read lock)."""
