@@ -74,14 +74,12 @@ class AuditResult:
         input: What was audited.
         run: The graph as a SLAM run: ``before`` every edge, ``after`` the cleaned graph.
         verdicts: One per edge, the graph's in file order, then the injected ones.
-        cleaned: The cleaned graph's edges, as a graph file writes them.
         seconds: Wall time per stage.
     """
 
     input: AuditInput
     run: SlamResult
     verdicts: list[Verdict]
-    cleaned: list[G2oEdge]
     seconds: dict[str, float]
 
     @property
@@ -161,8 +159,8 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
     t = time.perf_counter()
     before = optimize(graph.poses, _factors(own, len(graph)), config.graph, anchor=anchor)
     kept = [_kept_factor(e, cov, config) for e, cov in zip(edges, covariances, strict=True)]
-    cleaned = [f for f in kept if f is not None]
-    after = optimize(graph.poses, _with_ties(cleaned, len(graph)), config.graph, anchor=anchor)
+    cleaned = _with_ties([f for f in kept if f is not None], len(graph))
+    after = optimize(graph.poses, cleaned, config.graph, anchor=anchor)
     seconds["back_end"] = time.perf_counter() - t
     reasons = _Reasons(judgement, rescued, scans)
     verdicts = [
@@ -178,9 +176,10 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
         after=after,
         threshold=judgement.threshold,
         seconds=seconds,
+        after_edges=cleaned,
+        given=graph.poses,
     )
-    written = [G2oEdge(f.a, f.b, f.measurement, information_of(f.covariance)) for f in cleaned]
-    return AuditResult(inp, run, verdicts, written, seconds)
+    return AuditResult(inp, run, verdicts, seconds)
 
 
 @dataclass

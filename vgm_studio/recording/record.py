@@ -34,6 +34,7 @@ from vgm_studio.vgm.render import heatmap
 
 COLOURS = {
     "odometry": (150, 150, 150),
+    "input": (150, 150, 150),
     "before": (230, 120, 40),
     "after": (40, 160, 240),
     "sequential": (90, 200, 120),

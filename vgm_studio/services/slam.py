@@ -7,35 +7,22 @@ import time
 from collections import Counter
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
 
-import numpy as np
-from numpy.typing import NDArray
-
-from vgm_studio.atomic import write_json_atomically
 from vgm_studio.datasets import ReadOptions
-from vgm_studio.datasets.g2o import G2oEdge, information_of, write_g2o
 from vgm_studio.datasets.scans import ScanLog
 from vgm_studio.datasets.source import JoinOptions, LogSource, read_slam_source
-from vgm_studio.datasets.tum import write_tum
 from vgm_studio.errors import InputError
-from vgm_studio.graph.metrics import RelationErrors
-from vgm_studio.maps.png import write_maps
-from vgm_studio.maps.ros_map import write_ros_map
 from vgm_studio.matching.agreement import check_agreement, disagreement_warning, motions_of
 from vgm_studio.matching.edges import write_edges
 from vgm_studio.model.registry import BUNDLED_MODEL, VALIDATOR_MODELS
-from vgm_studio.recording import write_recording
 from vgm_studio.services import Say, Voice
+from vgm_studio.services.outputs import RunFiles, write_json, write_run_files
 from vgm_studio.slam.config import SlamConfig
 from vgm_studio.slam.loop_edges import loop_edges
 from vgm_studio.slam.pipeline import SlamResult, run_slam
 from vgm_studio.slam.report import (
-    LOOP_COLOURS,
     edge_line,
     errors_of,
-    loop_segments,
-    run_maps,
     summary,
     table,
 )
@@ -129,17 +116,21 @@ def run_slam_command(
     errors = errors_of(result, source.relations) if source.relations is not None else None
     if errors is not None:
         say(table(errors))
-    _write_outputs(source, result, errors, config, outputs, say)
+    files = RunFiles(
+        outputs.maps,
+        outputs.record,
+        outputs.spawn,
+        outputs.trajectory,
+        outputs.ros_map,
+        outputs.g2o,
+    )
+    write_run_files(source.log, result, errors, config.maps, files, voice)
     if outputs.loops is not None:
         _write_loops(outputs.loops, source, result, say)
-    if outputs.trajectory is not None:
-        _write_trajectory(outputs.trajectory, source.log, result, voice)
-    if outputs.g2o is not None:
-        _write_graph(outputs.g2o, source.log, result, say)
     seconds = time.perf_counter() - start
     if outputs.json is not None:
         settings = json.loads(json.dumps(asdict(config), default=str))
-        _write_json(outputs.json, summary(result, errors, settings, seconds))
+        write_json(outputs.json, summary(result, errors, settings, seconds))
         say(f"wrote {outputs.json}")
     say(f"done in {seconds:.1f} s")
 
@@ -153,89 +144,6 @@ def _write_loops(path: Path, source: LogSource, result: SlamResult, say: Say) ->
         + ", ".join(f"{n} {label}" for label, n in sorted(labels.items()))
         + ")"
     )
-
-
-def _write_trajectory(path: Path, log: ScanLog, result: SlamResult, voice: Voice) -> None:
-    """Every scan's pose of the after graph, at its timestamp, as a TUM file."""
-    times = log.timestamps
-    problem = _time_problem(times)
-    if problem is not None:
-        # A TUM file needs increasing times; the scan index keeps the poses in order and
-        # still pairs them with another file written from this log.
-        voice.warn(f"{log.path}: {problem}; {path} takes the scan index as each pose's time")
-        times = np.arange(len(times), dtype=np.float64)
-    poses = result.scan_poses(result.after.poses)
-    write_tum(path, times, poses)
-    voice.say(f"wrote {path} ({len(poses)} scan poses, TUM: timestamp x y z qx qy qz qw)")
-
-
-def _write_graph(path: Path, log: ScanLog, result: SlamResult, say: Say) -> None:
-    """The after graph as g2o: its optimised keyframe poses, each with its scan, and the very
-    factors it was optimised over (the odometry fallbacks included), so that another
-    optimiser given the file solves the same problem."""
-    edges = [
-        G2oEdge(e.a, e.b, e.measurement, information_of(e.covariance)) for e in result.after_edges
-    ]
-    scans = [log.scans[i] for i in result.keyframes]
-    try:
-        write_g2o(path, result.after.poses, edges, scans)
-    except OSError as exc:
-        raise InputError(path, f"cannot write ({exc.strerror or exc})") from None
-    say(f"wrote {path} ({len(scans)} keyframes, {len(edges)} edges, g2o)")
-
-
-def _time_problem(times: NDArray[np.float64]) -> str | None:
-    """Why a log's scan timestamps cannot be a trajectory's times; None where they can."""
-    bad = np.flatnonzero(~np.isfinite(times))
-    if len(bad):
-        return f"{len(bad)} scans have no timestamp (the first is scan {bad[0]})"
-    back = np.flatnonzero(np.diff(times) <= 0)
-    if len(back):
-        return (
-            f"the scan timestamps do not increase at {len(back)} scans "
-            f"(the first is scan {back[0] + 1})"
-        )
-    return None
-
-
-def _write_outputs(
-    source: LogSource,
-    result: SlamResult,
-    errors: dict[str, RelationErrors] | None,
-    config: SlamConfig,
-    outputs: SlamOutputs,
-    say: Say,
-) -> None:
-    """The maps (PNG, ROS) and the recording, each timed into the run's seconds."""
-    maps = None
-    wanted = (outputs.maps, outputs.record, outputs.ros_map)
-    if any(out is not None for out in wanted) or outputs.spawn:
-        t = time.perf_counter()
-        maps = run_maps(source.log, result, config.maps)
-        result.seconds["maps"] = time.perf_counter() - t
-        for name, grid in maps.items():
-            if grid.resolution > config.maps.resolution:
-                say(f"the {name} map is {grid.resolution:.2f} m a cell, to fit its size")
-    if outputs.maps is not None and maps is not None:
-        edges = ("after", loop_segments(result), LOOP_COLOURS)
-        for path in write_maps(outputs.maps, maps, edges):
-            say(f"wrote {path}")
-    if outputs.ros_map is not None and maps is not None:
-        for path in write_ros_map(outputs.ros_map, maps["after"]):
-            say(f"wrote {path}")
-    if outputs.record is not None or outputs.spawn:
-        t = time.perf_counter()
-        write_recording(source.log, result, maps or {}, errors, outputs.record, outputs.spawn)
-        result.seconds["recording"] = time.perf_counter() - t
-        if outputs.record is not None:
-            say(f"wrote {outputs.record}")
-
-
-def _write_json(path: Path, doc: dict[str, Any]) -> None:
-    try:
-        write_json_atomically(path, doc)
-    except OSError as exc:
-        raise InputError(path, f"cannot write ({exc.strerror or exc})") from None
 
 
 def _no_loop_closed(log: ScanLog, result: SlamResult) -> list[str]:

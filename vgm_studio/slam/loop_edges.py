@@ -10,6 +10,7 @@ them one by one, or train on it.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -28,8 +29,10 @@ def loop_edges(
     result: SlamResult,
     params: dict[str, Any],
     thresholds: LabelThresholds | None = None,
+    chosen: Sequence[SlamEdge] | None = None,
 ) -> list[Edge]:
-    """The run's matched loops (injected false loops left out) as edges between log scans.
+    """The run's matched loops (injected false loops left out) as edges between log scans;
+    ``chosen`` names other edges of the run instead (an audit's flagged ones).
 
     Each edge's ``match`` holds the loop matcher's figures and, under ``slam``, the run's own
     view of it: where the candidate came from, p(success), the validator's and the consistency
@@ -49,9 +52,13 @@ def loop_edges(
     mount = "" if log.mount is None else log.mount.id_text()
     log_path = str(Path(log.path).resolve())
     out = []
-    for e in result.edges:
-        if e.kind != "loop" or e.injected or e.match.covariance is None:
-            continue
+    if chosen is None:
+        chosen = [
+            e
+            for e in result.edges
+            if e.kind == "loop" and not e.injected and e.match.covariance is not None
+        ]
+    for e in chosen:
         a, b = int(result.keyframes[e.a]), int(result.keyframes[e.b])
         estimate = [float(v) for v in e.estimate]
         figures = {**e.match.figures(), "slam": _decisions(e)}
@@ -72,7 +79,7 @@ def loop_edges(
                 b=b,
                 timestamp_a=log.scans[a].timestamp,
                 timestamp_b=log.scans[b].timestamp,
-                kind="loop",
+                kind=e.kind,
                 guess=[float(v) for v in e.guess],
                 estimate=estimate,
                 match=figures,

@@ -41,6 +41,8 @@ class SlamResult:
             ``RunningEstimate.update``), else 0.
         after_edges: The factors ``after`` was optimised over: the kept edges and the odometry
             that stands in for each rejected sequential one (a g2o export writes these).
+        given: (K, 3) the keyframe poses an audited graph came with: its maps, recording and
+            relation errors then start from ``input``, not the odometry.
     """
 
     keyframes: NDArray[np.int64]
@@ -53,6 +55,7 @@ class SlamResult:
     seconds: dict[str, float] = field(default_factory=dict)
     isam2_restarts: int = 0
     after_edges: list[GraphEdge] = field(default_factory=list)
+    given: NDArray[np.float64] | None = None
 
     @property
     def odometry_keyframes(self) -> NDArray[np.float64]:

@@ -23,12 +23,14 @@ _SOURCES = (*LOOP_SOURCES, "injected")
 
 
 def keyframe_trajectories(result: SlamResult) -> dict[str, NDArray[np.float64]]:
-    """The three keyframe trajectories by name: odometry, before, after."""
-    return {
-        "odometry": result.odometry_keyframes,
-        "before": result.before.poses,
-        "after": result.after.poses,
-    }
+    """The three keyframe trajectories by name: odometry (``input`` for an audited graph),
+    before, after."""
+    start = (
+        {"odometry": result.odometry_keyframes}
+        if result.given is None
+        else {"input": result.given}
+    )
+    return {**start, "before": result.before.poses, "after": result.after.poses}
 
 
 def run_maps(log: ScanLog, result: SlamResult, config: MapConfig) -> dict[str, OccupancyGrid]:
@@ -152,7 +154,7 @@ def summary(
             "edges": [edge_json(e) for e in result.edges],
         }
     )
-    finite: dict[str, Any] = _finite(out)
+    finite: dict[str, Any] = finite_json(out)
     return finite
 
 
@@ -172,12 +174,12 @@ def edge_json(edge: SlamEdge) -> dict[str, Any]:
     }
 
 
-def _finite(value: Any) -> Any:
-    # JSON has no NaN: a figure that could not be measured is null.
+def finite_json(value: Any) -> Any:
+    """``value`` with every float that is not finite made None (JSON has no NaN)."""
     if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
+        return {k: finite_json(v) for k, v in value.items()}
     if isinstance(value, list):
-        return [_finite(v) for v in value]
+        return [finite_json(v) for v in value]
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value

@@ -14,7 +14,14 @@ import typer
 
 from vgm_studio.datasets import ReadOptions
 from vgm_studio.errors import exit_on_error
-from vgm_studio.tools import fleet_cmd, model_cmds, slam_cmd, studio_cmds, trainer_cmds
+from vgm_studio.tools import (
+    audit_cmd,
+    fleet_cmd,
+    model_cmds,
+    slam_cmd,
+    studio_cmds,
+    trainer_cmds,
+)
 from vgm_studio.tools.options import (
     LogArg,
     MaxLoopsOpt,
@@ -278,6 +285,7 @@ app.command("export")(studio_cmds.export)
 app.command("import")(studio_cmds.import_)
 app.command("agreement")(studio_cmds.agreement)
 app.command("slam")(slam_cmd.slam)
+app.command("audit")(audit_cmd.audit)
 app.command("fleet")(fleet_cmd.fleet)
 app.command("trainer")(trainer_cmds.trainer)
 app.command("models")(trainer_cmds.models)

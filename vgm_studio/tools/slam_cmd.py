@@ -17,8 +17,24 @@ from vgm_studio.tools.options import (
     one_of,
     positive,
     with_read_options,
-    writable_file,
-    writable_folder,
+)
+from vgm_studio.tools.run_options import (
+    G2oOpt,
+    InjectOpt,
+    InjectSeedOpt,
+    JsonOutOpt,
+    LoopThresholdOpt,
+    MapPngOpt,
+    ModelOpt,
+    RecordOpt,
+    ReferenceOpt,
+    RelationsOpt,
+    ResolutionOpt,
+    RosMapOpt,
+    SpawnOpt,
+    TimeOffsetOpt,
+    TrajectoryOpt,
+    check_writable,
 )
 
 
@@ -45,22 +61,8 @@ def slam(
             "score; see --model) or reference (edges that land on the reference pose).",
         ),
     ] = "vgmnet",
-    model: Annotated[
-        Path | None,
-        typer.Option(
-            metavar="MODEL.pt",
-            help="Checkpoint for the model validators.",
-            show_default="assets/models/vgmnet-default.pt for vgmnet",
-        ),
-    ] = None,
-    loop_threshold: Annotated[
-        float,
-        typer.Option(
-            help="p(success) a loop edge needs, in [0, 1]; never below the checkpoint's "
-            "threshold (0: the checkpoint's alone).",
-            callback=number(0, 1),
-        ),
-    ] = 0.8,
+    model: ModelOpt = None,
+    loop_threshold: LoopThresholdOpt = 0.8,
     loop_precision: Annotated[
         float,
         typer.Option(
@@ -90,70 +92,17 @@ def slam(
             "maximisation) or none."
         ),
     ] = ConsistencyChoice.pcm,
-    reference: Annotated[
-        Path | None,
-        typer.Option(
-            metavar="REF",
-            help="Reference poses (a corrected log or a log with TRUEPOS): the run is scored "
-            "against relations drawn from them (unless --relations), and --validator "
-            "reference uses them.",
-            show_default="the log's own reference poses",
-        ),
-    ] = None,
-    time_offset: Annotated[
-        float,
-        typer.Option(
-            help="Seconds added to the reference log's timestamps before the join.",
-            callback=number(),
-        ),
-    ] = 0.0,
+    reference: ReferenceOpt = None,
+    time_offset: TimeOffsetOpt = 0.0,
     time_tolerance: TimeToleranceOpt = 0.05,
-    relations: Annotated[
-        Path | None,
-        typer.Option(
-            metavar="FILE",
-            help="Freiburg relations file: report the relation errors (Kümmerle et al. 2009).",
-        ),
-    ] = None,
-    json_out: Annotated[
-        Path | None,
-        typer.Option("--json", metavar="OUT", help="Write the run's figures as JSON."),
-    ] = None,
-    map_png: Annotated[
-        Path | None,
-        typer.Option(
-            metavar="DIR", help="Write odometry, before and after maps (and all three) as PNG."
-        ),
-    ] = None,
-    ros_map: Annotated[
-        Path | None,
-        typer.Option(
-            metavar="DIR",
-            help="Write the after map as ROS map_server / Nav2 load it: DIR/map.pgm and "
-            "DIR/map.yaml.",
-        ),
-    ] = None,
-    trajectory: Annotated[
-        Path | None,
-        typer.Option(
-            metavar="OUT.txt",
-            help="Write every scan's pose of the after graph as a TUM trajectory "
-            "(timestamp x y z qx qy qz qw), as evo and other evaluation tools read it.",
-        ),
-    ] = None,
-    g2o: Annotated[
-        Path | None,
-        typer.Option(
-            metavar="OUT.g2o",
-            help="Write the after graph as g2o 2D (VERTEX_SE2 with each keyframe's scan as "
-            "ROBOTLASER1, EDGE_SE2, FIX), as g2o, gtsam and other optimisers read it.",
-        ),
-    ] = None,
-    record: Annotated[
-        Path | None,
-        typer.Option(metavar="OUT.rrd", help="Write a rerun recording (no viewer needed)."),
-    ] = None,
-    spawn: Annotated[bool, typer.Option(help="Open the rerun viewer on the run.")] = False,
+    relations: RelationsOpt = None,
+    json_out: JsonOutOpt = None,
+    map_png: MapPngOpt = None,
+    ros_map: RosMapOpt = None,
+    trajectory: TrajectoryOpt = None,
+    g2o: G2oOpt = None,
+    record: RecordOpt = None,
+    spawn: SpawnOpt = False,
     loops_out: Annotated[
         Path | None,
         typer.Option(
@@ -184,12 +133,9 @@ def slam(
             "revisits no kept loop closes."
         ),
     ] = True,
-    resolution: Annotated[float, positive("Map cell edge, metres (> 0).")] = 0.05,
-    inject_false_loops: Annotated[
-        int,
-        typer.Option(help="Inject this many false loop closures (robustness tests).", min=0),
-    ] = 0,
-    seed: Annotated[int, typer.Option(help="Seed for the injected loops.", min=0)] = 0,
+    resolution: ResolutionOpt = 0.05,
+    inject_false_loops: InjectOpt = 0,
+    seed: InjectSeedOpt = 0,
 ) -> None:
     """Graph SLAM with validated edges: odometry, loops, gtsam, maps, metrics, a recording."""
     from vgm_studio.datasets.source import JoinOptions
@@ -204,13 +150,9 @@ def slam(
         ValidationConfig,
     )
 
-    for out in (json_out, record, loops_out, trajectory, g2o):
-        if out is not None:
-            writable_file(out)
-    if map_png is not None:
-        writable_folder(map_png, "--map-png")
-    if ros_map is not None:
-        writable_folder(ros_map, "--ros-map")
+    files = {"json": json_out, "record": record, "loops": loops_out, "g2o": g2o}
+    files["trajectory"] = trajectory
+    check_writable(files, {"--map-png": map_png, "--ros-map": ros_map})
     config = SlamConfig(
         front_end=FrontEndConfig(
             keyframe_distance=keyframe_distance,
