@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vgm_studio.core import se2
-from vgm_studio.vgm.blend import blend
+from vgm_studio.vgm.blend import CUR_HUE, PREV_HUE, blend
 from vgm_studio.vgm.spread import spread_pair
 
 # BGR colours: previous scan blue-cyan, current scan orange, as in most scan-matching viewers.
@@ -251,6 +251,16 @@ def _add_caption(
             (235, 235, 235),
             1,
             cv2.LINE_AA,
+        )
+        (width, _), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)
+        x += 12 + width + 24
+    # The cells' hues, as squares (the points are discs).
+    both = np.clip(PREV_HUE + CUR_HUE, 0, 1)
+    for text, hue in (("cells: previous", PREV_HUE), ("current", CUR_HUE), ("both", both)):
+        swatch = _bgr(hue[::-1] * 255)
+        cv2.rectangle(bar, (x - 6, legend_y - 11), (x + 6, legend_y + 1), swatch, -1)
+        cv2.putText(
+            bar, text, (x + 12, legend_y), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (235, 235, 235), 1
         )
         (width, _), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)
         x += 12 + width + 24
