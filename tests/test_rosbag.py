@@ -511,7 +511,7 @@ def test_open_log_reports_a_garbage_bag(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("terminal", [True, False])
-def test_progress_bar_on_a_terminal_only(
+def test_progress_a_bar_on_a_terminal_and_a_line_elsewhere(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, terminal: bool
 ) -> None:
     class Stderr(io.StringIO):
@@ -525,8 +525,11 @@ def test_progress_bar_on_a_terminal_only(
     total = NUM_SCANS + 101  # /chatter is not read
     if terminal:
         assert f"{total}/{total}" in stderr.getvalue() and path.name in stderr.getvalue()
-    else:
-        assert stderr.getvalue() == ""
+    else:  # a pipe or a log file: one plain line where the reading ended, no bar
+        assert re.fullmatch(
+            rf"{re.escape(path.name)}: {total}/{total} messages \(100%\) \d+ s\n",
+            stderr.getvalue(),
+        )
 
 
 def _index_pos_at(data: bytes) -> tuple[int, int]:

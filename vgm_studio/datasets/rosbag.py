@@ -32,7 +32,6 @@ those, readings below ``MIN_VALID_RANGE`` and readings at or beyond ``max_range`
 from __future__ import annotations
 
 import math
-import sys
 from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import suppress
@@ -44,7 +43,6 @@ import numpy as np
 from numpy.typing import NDArray
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
-from tqdm import tqdm
 
 from vgm_studio.core.hashing import content_hash
 from vgm_studio.core.se2 import wrap_angle
@@ -54,6 +52,7 @@ from vgm_studio.datasets.options import ReadOptions
 from vgm_studio.datasets.scans import Scan, ScanLog
 from vgm_studio.datasets.tf import TF_TYPES, TfTree, mount_from_tf
 from vgm_studio.errors import InputError
+from vgm_studio.progress import counter
 
 if TYPE_CHECKING:
     from rosbags.interfaces import Connection, TopicInfo
@@ -153,7 +152,7 @@ def _messages(
 ) -> Iterator[tuple[Connection, int, Any]]:
     """Deserialised messages in bag order, with a progress bar; rosbags' errors as InputError."""
     raw_messages = reader.messages(connections=connections)
-    with tqdm(total=total, desc=path.name, unit="msg", file=sys.stderr, disable=None) as bar:
+    with counter(total, path.name, "message") as bar:
         while True:
             try:
                 connection, receive_ns, data = next(raw_messages)

@@ -16,7 +16,6 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
-from tqdm import tqdm
 
 from vgm_studio.core import se2
 from vgm_studio.datasets.relations import MatchedRelation
@@ -29,6 +28,7 @@ from vgm_studio.matching.reference_labels import (
     contradicts_reference,
     reference_label,
 )
+from vgm_studio.progress import track
 
 
 @dataclass(frozen=True)
@@ -226,7 +226,7 @@ def make_candidates(
     log_path = str(Path(log.path).resolve())
     return [
         _matched(log, log_path, p, matcher, thresholds, recorded)
-        for p in tqdm(pairs, desc="matching", unit="edge", disable=None if progress else True)
+        for p in track(pairs, "matching", "edge", enabled=progress)
     ]
 
 

@@ -8,12 +8,12 @@ import numpy as np
 from kiss_icp.config import KISSConfig
 from kiss_icp.kiss_icp import KissICP
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.registration import as_3d
+from vgm_studio.progress import track
 
 
 def kiss_config(config: MatchConfig) -> KISSConfig:
@@ -39,9 +39,7 @@ def lidar_odometry(
     """
     pipeline = KissICP(kiss_config(config or MatchConfig()))
     poses = np.zeros((len(scans), 3))
-    for i, scan in enumerate(
-        tqdm(scans, desc="odometry", unit="scan", disable=None if progress else True)
-    ):
+    for i, scan in enumerate(track(scans, "odometry", "scan", enabled=progress)):
         pts = scan.points()
         if len(pts) >= 3:
             pipeline.register_frame(as_3d(pts), np.zeros(len(pts)))

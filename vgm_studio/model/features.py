@@ -13,12 +13,12 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from vgm_studio.core import se2
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
 from vgm_studio.model.context import Context, LocalMapper, log_poses
+from vgm_studio.progress import track
 from vgm_studio.vgm.grid import VGMParams, batch_cells
 
 
@@ -84,7 +84,7 @@ def load_samples(
     # edges together, so each log's matches are still made once.
     mapper: LocalMapper | None = None
     out = []
-    for edge in tqdm(edges, desc="reading scans", unit="edge", disable=None if progress else True):
+    for edge in track(edges, "reading scans", "edge", enabled=progress):
         a, b = scans.scans(edge)
         if context is None or context.neighbours <= 0:
             prev, cur = a.points(), b.points()

@@ -19,7 +19,6 @@ import numpy as np
 import torch
 from numpy.typing import NDArray
 from torch import nn
-from tqdm import tqdm
 
 from vgm_studio.core.decision import DEFAULT_THRESHOLD
 from vgm_studio.model.features import PairSample
@@ -28,6 +27,7 @@ from vgm_studio.model.occlusion import cut_sectors
 from vgm_studio.model.precise_bn import precise_batch_norm
 from vgm_studio.model.resume import RunState, load_run, run_key, save_run
 from vgm_studio.model.validator import InputSpec, batched_logits, network_logits
+from vgm_studio.progress import track
 
 EpochHook = Callable[[int, int], None]
 
@@ -279,13 +279,13 @@ class _Run:
         t0 = time.perf_counter()
         rows = self.rows
         self.net.train()
-        bar = tqdm(
+        bar = track(
             self._batches(self.per_epoch, self.rng),
+            f"epoch {epoch}/{self.recipe.epochs}",
+            "batch",
             total=self.steps,
-            desc=f"epoch {epoch}/{self.recipe.epochs}",
-            unit="batch",
-            disable=None if progress else True,
-            leave=False,
+            enabled=progress,
+            leave=False,  # the epoch's own log line follows
         )
         total = 0.0
         for step, (idx, rot, batch) in enumerate(bar):

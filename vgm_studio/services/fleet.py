@@ -22,11 +22,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tqdm import tqdm
-
 from vgm_studio.atomic import write_json_atomically
 from vgm_studio.datasets.manifest import ManifestEntry, read_manifest
 from vgm_studio.errors import InputError
+from vgm_studio.progress import counter
 from vgm_studio.services import Say, quiet
 from vgm_studio.services.fleet_log import (
     RUNNING_FILE,
@@ -268,7 +267,7 @@ def _dispatch(
     idle = list(range(workers))
     pending: dict[Any, tuple[ManifestEntry, int]] = {}
     rows: dict[str, dict[str, Any]] = {}
-    bar = tqdm(total=len(todo), desc="fleet", unit="log", disable=None if progress else True)
+    bar = counter(len(todo), "fleet", "log", enabled=progress)
     while queue or pending:
         while queue and idle:
             entry, w = queue.popleft(), idle.pop()
@@ -284,7 +283,7 @@ def _dispatch(
             first = (str(exc).strip() or type(exc).__name__).splitlines()[0]
             row = {**base_row(entry, *keys[entry.name]), "error": f"worker lost: {first}"}
         rows[entry.name] = row
-        bar.set_postfix_str(f"{entry.name} {row['status']}", refresh=False)
+        bar.set_postfix(last=f"{entry.name} {row['status']}")
         bar.update(1)
     bar.close()
     for handle in pool:

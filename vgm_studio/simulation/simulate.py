@@ -29,12 +29,12 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from vgm_studio import __version__
 from vgm_studio.core import se2
 from vgm_studio.datasets.carmen import format_pose_message, format_robotlaser
 from vgm_studio.errors import InputError
+from vgm_studio.progress import track
 from vgm_studio.simulation.presets import build_world
 from vgm_studio.simulation.raycast import beam_angles, cast
 from vgm_studio.simulation.trajectory import Trajectory, follow, repeat_route
@@ -246,7 +246,7 @@ def simulate(config: SimConfig, out_dir: Path) -> Path:
     lines = _header(p)
     odom = p.odometry
     steps = se2.between(odom[np.maximum(np.arange(len(odom)) - 1, 0)], odom)
-    for k in tqdm(range(len(p.truth)), desc=f"simulate {config.preset}", unit="scan", disable=None):
+    for k in track(range(len(p.truth)), f"simulate {config.preset}", "scan"):
         t = float(p.truth.times[k])
         noise = config.range_noise * range_rng.standard_normal(config.num_beams)
         ranges = scan_ranges(p, k, noise)

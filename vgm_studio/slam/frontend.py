@@ -21,7 +21,6 @@ from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
@@ -31,6 +30,7 @@ from vgm_studio.matching.correlative import CorrelativeConfig, LoopMatcher, Sear
 from vgm_studio.matching.descriptor import PlaceIndex
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.matching.submap import Submap
+from vgm_studio.progress import counter
 from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
 from vgm_studio.slam.consistency import Loop, consistent
 from vgm_studio.slam.edges import WINDOW_SOURCES, SlamEdge, SlamEdgeKind, Validate
@@ -174,9 +174,7 @@ class FrontEnd:
     def run(self, progress: bool = True) -> list[SlamEdge]:
         """Matches and validates every edge; ``self.estimate`` ends with the kept ones."""
         count = len(self.scans)
-        bar = tqdm(
-            total=count, desc="front end", unit="keyframe", disable=None if progress else True
-        )
+        bar = counter(count, "front end", "keyframe", enabled=progress)
         bar.update(1)
         with ThreadPoolExecutor(self._threads, thread_name_prefix="loops") as self._pool:
             for start in range(1, count, self.config.block):

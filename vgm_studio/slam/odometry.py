@@ -40,7 +40,6 @@ from dataclasses import dataclass
 import numpy as np
 from kiss_icp.kiss_icp import KissICP
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
@@ -57,6 +56,7 @@ from vgm_studio.matching.odometry import kiss_config
 from vgm_studio.matching.refinement import Refinement, refine_with
 from vgm_studio.matching.registration import as_3d, pose_to_4x4
 from vgm_studio.matching.submap import Submap
+from vgm_studio.progress import track
 
 
 @dataclass(frozen=True)
@@ -131,7 +131,7 @@ def scan_odometry(
     wheels = all(s.odometry is not None for s in scans)
     poses = np.zeros((len(scans), 3))
     previous: Scan | None = None
-    bar = tqdm(scans, desc="odometry", unit="scan", disable=None if progress else True)
+    bar = track(scans, "odometry", "scan", enabled=progress)
     for i, scan in enumerate(bar):
         if wheels and i > 0:
             delta = se2.between(scans[i - 1].odometry, scan.odometry)  # type: ignore[arg-type]
