@@ -7,6 +7,7 @@ import io
 import math
 import re
 import shutil
+import subprocess
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -530,6 +531,47 @@ def test_progress_a_bar_on_a_terminal_and_a_line_elsewhere(
             rf"{re.escape(path.name)}: {total}/{total} messages \(100%\) \d+ s\n",
             stderr.getvalue(),
         )
+
+
+def scan_among_others(ts: Typestore) -> list[Message]:
+    """/scan beside a second and a third LaserScan topic, as robots with several lasers record."""
+    others = [
+        (topic, receive, laser_scan(ts, scan_stamp_ns(k), np.full(NUM_BEAMS, 2.5)))
+        for topic in ("/scan_rear", "/lidar/scan")
+        for k, (_, receive, _) in enumerate(scan_messages(ts))
+    ]
+    return scan_messages(ts) + others + odom_messages(ts)
+
+
+@pytest.mark.parametrize("kind", ["rosbag1", "rosbag2-mcap"])
+def test_of_several_scan_topics_scan_is_read_with_a_warning(tmp_path: Path, kind: str) -> None:
+    path = write_bag(tmp_path, kind, scan_among_others)
+    log = read_rosbag(path)
+    assert log.message_counts == {"/scan": NUM_SCANS, "/odom": 101}
+    assert log.ignored_messages == {"/scan_rear": NUM_SCANS, "/lidar/scan": NUM_SCANS}
+    assert log.warnings == [
+        f"{path}: 3 sensor_msgs/LaserScan topics; reading /scan (not /lidar/scan, "
+        "/scan_rear); choose another with --scan-topic"
+    ]
+    # Asked for, another topic is read without a word.
+    rear = read_rosbag(path, ReadOptions(scan_topic="/scan_rear"))
+    assert rear.message_counts["/scan_rear"] == NUM_SCANS and rear.warnings == []
+
+
+def test_the_commands_print_which_scan_topic_they_read(tmp_path: Path) -> None:
+    path = write_bag(tmp_path, "rosbag2-mcap", scan_among_others)
+    exe = shutil.which("vgm-studio")
+    cmd = [exe] if exe else [sys.executable, "-m", "vgm_studio.tools.cmd"]
+    for args in (["info", path], ["candidates", path, "--out", tmp_path / "e.jsonl"]):
+        proc = subprocess.run(
+            [*cmd, *map(str, args)], capture_output=True, text=True, timeout=600, check=False
+        )
+        assert proc.returncode == 0, proc.stderr
+        warned = [line for line in proc.stderr.splitlines() if "LaserScan topics" in line]
+        assert warned == [
+            f"{path}: 3 sensor_msgs/LaserScan topics; reading /scan (not /lidar/scan, "
+            "/scan_rear); choose another with --scan-topic"
+        ], proc.stderr
 
 
 def _index_pos_at(data: bytes) -> tuple[int, int]:

@@ -22,7 +22,8 @@ class ReadOptions:
             (81.91 m for a SICK LMS, ~51 m for a PLS, 32.767 m for others).
         laser: ``front`` reads FLASER/ROBOTLASER1, ``rear`` reads RLASER.
         skip_bad_lines: Read on past malformed lines and count them instead of stopping.
-        scan_topic: ROS bags: the LaserScan topic (``None``: the only one in the bag).
+        scan_topic: ROS bags: the LaserScan topic (``None``: the only one in the bag, or
+            ``/scan`` among several).
         odom_topic: ROS bags: the Odometry topic (``None``: the only one, if any).
         laser_pose: The laser in the robot's base frame as (x m, y m, yaw degrees); with
             ``laser_flipped`` it overrides what a bag's tf says. ``None``: from tf, else the base.

@@ -6,7 +6,8 @@ Reads, with the ``rosbags`` library and without a ROS installation:
 * ROS 2 bags: a folder holding ``metadata.yaml`` and sqlite3 (``.db3``) or mcap storage, or one
   such storage file on its own (format ``rosbag2``).
 
-Topics: the scans come from ``ReadOptions.scan_topic``, or from the bag's only LaserScan topic.
+Topics: the scans come from ``ReadOptions.scan_topic``, or from the bag's only LaserScan topic,
+or, of several, from ``/scan`` (ROS's usual name; a warning says so and names the others).
 Odometry is optional and comes from ``ReadOptions.odom_topic``, or from the bag's only Odometry
 topic when it has one. Other topics are not read; their message counts go to
 ``ScanLog.ignored_messages``.
@@ -61,6 +62,9 @@ LASER_SCAN_TYPES = frozenset({"sensor_msgs/msg/LaserScan", "sensor_msgs/LaserSca
 ODOMETRY_TYPES = frozenset({"nav_msgs/msg/Odometry", "nav_msgs/Odometry"})
 ROS2_STORAGE_SUFFIXES = frozenset({".db3", ".mcap"})
 
+# The LaserScan topic taken, with a warning, when a bag has several and none is asked for.
+DEFAULT_SCAN_TOPIC = "/scan"
+
 # Seconds a scan may lie before the first or after the last Odometry message and still take it.
 MAX_ODOMETRY_EXTRAPOLATION = 0.5
 
@@ -109,18 +113,43 @@ def _describe_topics(topics: Mapping[str, TopicInfo]) -> str:
     return f"topics found: {listed}"
 
 
+@dataclass(frozen=True)
+class _Kind:
+    """A message type a bag is read for, and how its topic is chosen.
+
+    Attributes:
+        types: Its type names (ROS 1 and ROS 2 spellings).
+        what: Its name in messages.
+        option: The option that chooses its topic.
+        required: A bag without it is refused.
+        default: The topic taken, with a warning, when the bag has several and none is asked
+            for (None: refuse, naming them).
+    """
+
+    types: frozenset[str]
+    what: str
+    option: str
+    required: bool
+    default: str | None = None
+
+
+SCANS = _Kind(LASER_SCAN_TYPES, "sensor_msgs/LaserScan", "--scan-topic", True, DEFAULT_SCAN_TOPIC)
+# No usual name to fall back on: /odom and /odometry/filtered are both common, and reading
+# the wrong one misplaces every scan.
+ODOMETRY = _Kind(ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic", False)
+
+
 def _choose_topic(
     path: Path,
     topics: Mapping[str, TopicInfo],
-    types: frozenset[str],
+    kind: _Kind,
     wanted: str | None,
-    *,
-    what: str,
-    option: str,
-    required: bool,
+    warnings: list[str],
 ) -> str | None:
-    """The topic to read for one message type: the one asked for, else the only one."""
-    candidates = sorted(name for name, info in topics.items() if info.msgtype in types)
+    """The topic to read for one message type: the one asked for, else the only one, else
+    the kind's default when it is one of several (said in ``warnings``)."""
+    what, option = kind.what, kind.option
+    candidates = sorted(name for name, info in topics.items() if info.msgtype in kind.types)
     if wanted is not None:
         if wanted in candidates:
             return wanted
@@ -131,12 +160,20 @@ def _choose_topic(
         raise InputError(path, f"{problem}; {_describe_topics(topics)}")
     if len(candidates) == 1:
         return candidates[0]
+    if len(candidates) > 1 and kind.default in candidates:
+        others = ", ".join(c for c in candidates if c != kind.default)
+        warnings.append(
+            f"{path}: {len(candidates)} {what} topics; reading {kind.default} (not {others}); "
+            f"choose another with {option}"
+        )
+        return kind.default
     if len(candidates) > 1:
         raise InputError(
             path,
-            f"{len(candidates)} {what} topics ({', '.join(candidates)}); choose one with {option}",
+            f"{len(candidates)} {what} topics ({', '.join(candidates)}); choose one with "
+            f"{option} TOPIC",
         )
-    if required:
+    if kind.required:
         raise InputError(path, f"no {what} topic in this bag; {_describe_topics(topics)}")
     return None
 
@@ -239,31 +276,18 @@ class _Collected:
                 self.odom_poses.append(pose)
 
 
-def _read_messages(path: Path, reader: AnyReader, options: ReadOptions) -> tuple[_Collected, str]:
-    """Reads the scan, odometry and (without a mount in the options) tf topics."""
+def _read_messages(
+    path: Path, reader: AnyReader, options: ReadOptions, warnings: list[str]
+) -> tuple[_Collected, str]:
+    """Reads the scan, odometry and (without a mount in the options) tf topics; what a person
+    should hear about the choice of topics goes to ``warnings``."""
     try:
         topics = reader.topics
     except BAG_ERRORS as err:
         raise bag_error(path, err) from None
-    scan_topic = _choose_topic(
-        path,
-        topics,
-        LASER_SCAN_TYPES,
-        options.scan_topic,
-        what="sensor_msgs/LaserScan",
-        option="--scan-topic",
-        required=True,
-    )
+    scan_topic = _choose_topic(path, topics, SCANS, options.scan_topic, warnings)
     assert scan_topic is not None  # required
-    odom_topic = _choose_topic(
-        path,
-        topics,
-        ODOMETRY_TYPES,
-        options.odom_topic,
-        what="nav_msgs/Odometry",
-        option="--odom-topic",
-        required=False,
-    )
+    odom_topic = _choose_topic(path, topics, ODOMETRY, options.odom_topic, warnings)
     read = {t for t in (scan_topic, odom_topic) if t is not None}
     if mount_from_options(options.laser_pose, options.laser_flipped) is None:
         read |= {name for name, info in topics.items() if info.msgtype in TF_TYPES}
@@ -295,8 +319,9 @@ def read_rosbag(path: str | Path, options: ReadOptions | None = None) -> ScanLog
     options = options or ReadOptions()
     is_ros1 = _check_path(path)
     reader = _open_reader(path, is_ros1)
+    warnings: list[str] = []
     try:
-        got, scan_topic = _read_messages(path, reader, options)
+        got, scan_topic = _read_messages(path, reader, options, warnings)
         topics = reader.topics
     finally:
         with suppress(*BAG_ERRORS):
@@ -330,6 +355,7 @@ def read_rosbag(path: str | Path, options: ReadOptions | None = None) -> ScanLog
         message_counts=dict(got.counts),
         mount=scans[0].mount,
         mount_source=mount_source,
+        warnings=warnings,
     )
 
 

@@ -97,6 +97,8 @@ class ScanLog:
         skipped_line_numbers: Their line numbers, in file order.
         mount: The laser's mount its scans are placed by, None for a laser at the base.
         mount_source: Where the mount came from (``/tf_static``, ``--laser-pose`` …).
+        warnings: What the reader chose that a person should hear about (one line each),
+            such as which of a bag's LaserScan topics it read.
     """
 
     path: Path
@@ -111,6 +113,7 @@ class ScanLog:
     message_counts: dict[str, int] = field(default_factory=dict)
     mount: LaserMount | None = None
     mount_source: str | None = None
+    warnings: list[str] = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.scans)

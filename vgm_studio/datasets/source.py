@@ -63,6 +63,11 @@ def skipped_lines(log: ScanLog) -> list[str]:
     return [f"{log.path}: skipped {log.skipped_lines} malformed line(s){where}"]
 
 
+def reading_warnings(log: ScanLog) -> list[str]:
+    """Everything the reader has to say about a log: lines skipped, topics chosen."""
+    return skipped_lines(log) + log.warnings
+
+
 def read_log(path: Path, options: ReadOptions, relations_go_to: str = "--reference") -> LogSource:
     """Reads a log alone, refusing a relations file given in its place.
 
@@ -76,7 +81,7 @@ def read_log(path: Path, options: ReadOptions, relations_go_to: str = "--referen
         raise InputError(path, f"this is a Freiburg relations file; {where}")
     log = open_log(path, options)
     params: dict[str, Any] = {"read": asdict(options), "reference_source": "log"}
-    return LogSource(log, None, params, skipped_lines(log))
+    return LogSource(log, None, params, reading_warnings(log))
 
 
 def read_source(

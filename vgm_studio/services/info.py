@@ -8,7 +8,7 @@ from pathlib import Path
 from vgm_studio.datasets import ReadOptions, open_log
 from vgm_studio.datasets.relations import looks_like_relations, read_relations
 from vgm_studio.datasets.scans import mount_line
-from vgm_studio.datasets.source import skipped_lines
+from vgm_studio.datasets.source import reading_warnings
 from vgm_studio.datasets.summary import format_summary, summarize
 from vgm_studio.matching.agreement import MIN_EDGES, check_log
 from vgm_studio.services import Say, quiet
@@ -32,7 +32,7 @@ def describe(path: Path, read: ReadOptions, as_json: bool = False, warn: Say = q
             f"between {len(stamps)} scan timestamps"
         )
     log = open_log(path, read)
-    for line in skipped_lines(log):
+    for line in reading_warnings(log):
         warn(line)
     summary = summarize(log)
     return json.dumps(summary, indent=2) if as_json else format_summary(summary)
@@ -41,7 +41,7 @@ def describe(path: Path, read: ReadOptions, as_json: bool = False, warn: Say = q
 def check(path: Path, read: ReadOptions, as_json: bool = False, warn: Say = quiet) -> str:
     """``info --check``: matches consecutive keyframes and says whether they agree with odometry."""
     log = open_log(path, read)
-    for line in skipped_lines(log):
+    for line in reading_warnings(log):
         warn(line)
     agreement = check_log(log)
     mount = mount_line(log)

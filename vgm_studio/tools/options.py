@@ -288,7 +288,16 @@ _READ_PARAMETERS: tuple[tuple[str, Any, Any], ...] = (
         Annotated[bool, typer.Option(help="Skip malformed lines and report how many.")],
         False,
     ),
-    ("scan_topic", Annotated[str | None, typer.Option(help="ROS bags: LaserScan topic.")], None),
+    (
+        "scan_topic",
+        Annotated[
+            str | None,
+            typer.Option(
+                help="ROS bags: LaserScan topic (unset: the bag's only one; of several, /scan).",
+            ),
+        ],
+        None,
+    ),
     ("odom_topic", Annotated[str | None, typer.Option(help="ROS bags: Odometry topic.")], None),
     (
         "laser_pose",
