@@ -126,9 +126,14 @@ def read_labelled(
     scans: EdgeScans | None = None,
     progress: bool = True,
     context: Context | None = None,
+    to_train: bool = False,
 ) -> LabelledSet:
     """Reads edge files, keeps ``success`` and ``failure`` edges, loads their scans (each
-    side its scan's local map with a ``context``, ``model/context.py``)."""
+    side its scan's local map with a ``context``, ``model/context.py``).
+
+    With ``to_train``, too few edges of a class (``check_enough``) are refused before any
+    scan is loaded.
+    """
     edges: list[Edge] = []
     files = []
     for path in paths:
@@ -149,13 +154,15 @@ def read_labelled(
         raise InputError(
             paths[0] if paths else None, "no edge labelled success or failure in the given files"
         )
+    labels = np.array([e.label == "success" for e in edges], dtype=bool)
+    if to_train:
+        check_enough(labels, [str(p) for p in paths])
     samples = load_samples(
         edges,
         scans or EdgeScans(tuple(Path(p).parent for p in paths)),
         progress=progress,
         context=context,
     )
-    labels = np.array([e.label == "success" for e in edges], dtype=bool)
     return LabelledSet(edges, samples, labels, files, context or Context())
 
 
@@ -198,7 +205,7 @@ def _split(
         InputError: Fewer than ``MIN_PER_CLASS`` edges of a class, or a training split
             without both classes.
     """
-    check_enough(data)
+    check_enough(data.labels, [str(f["path"]) for f in data.files])
     train_idx, val_idx = stratified_split(
         data.labels, data.groups, config.val_fraction, config.seed
     )
@@ -213,17 +220,20 @@ def _split(
     return train_idx, val_idx, counts
 
 
-def check_enough(data: LabelledSet) -> None:
+def check_enough(labels: NDArray[np.bool_], paths: Sequence[str]) -> None:
     """Refuses labelled edges too few to train on and judge (``MIN_PER_CLASS`` a class).
+
+    Args:
+        labels: True for each ``success`` edge, False for each ``failure``.
+        paths: The files they came from, named in the refusal.
 
     Raises:
         InputError: Naming the file (or how many) and the counts.
     """
-    success = int(data.labels.sum())
-    failure = len(data.labels) - success
+    success = int(labels.sum())
+    failure = len(labels) - success
     if min(success, failure) >= MIN_PER_CLASS:
         return
-    paths = [str(f["path"]) for f in data.files]
     where = paths[0] if len(paths) == 1 else None
     held = "" if where else (f"{len(paths)} files: " if paths else "the edges: ")
     raise InputError(

@@ -28,7 +28,7 @@ def train_model(edges: list[Path], out: Path, config: TrainConfig, warn: Say = q
     Raises:
         InputError: No labelled edges, or training cannot start.
     """
-    data = read_labelled(edges, context=config.context)
+    data = read_labelled(edges, context=config.context, to_train=True)
     try:
         checkpoint = train(data, config, out, log=warn)
     except ValueError as exc:
