@@ -50,6 +50,9 @@ class UncertaintyGraph:
         self._vr: list[float] = []
         self._len: list[float] = []
         self._count = 1
+        # Each source's answer until the next edge: a check asks for the same sources more
+        # than once (an audit's group check asks one graph as the graph and as the drift).
+        self._known: dict[tuple[int, int], Relative] = {}
 
     def add(self, edge: GraphEdge) -> None:
         """Adds a kept edge (sequential, odometry or loop)."""
@@ -62,11 +65,17 @@ class UncertaintyGraph:
         self._vr.append(float(cov[2, 2]))
         self._len.append(float(np.hypot(edge.measurement[0], edge.measurement[1])))
         self._count = max(self._count, edge.a + 1, edge.b + 1)
+        self._known.clear()
 
     def relative(self, sources: NDArray[np.int64] | list[int], count: int) -> list[Relative]:
         """Uncertainty of keyframes ``0..count-1`` relative to each source."""
-        if len(sources) == 0:
-            return []
+        missing = sorted({int(s) for s in sources} - {s for s, c in self._known if c == count})
+        if missing:
+            found = self._search(missing, count)
+            self._known.update(((s, count), r) for s, r in zip(missing, found, strict=True))
+        return [self._known[(int(s), count)] for s in sources]
+
+    def _search(self, sources: list[int], count: int) -> list[Relative]:
         n = max(count, self._count)
         a0, b0 = np.array(self._a, dtype=np.int64), np.array(self._b, dtype=np.int64)
         vt0, vr0 = np.array(self._vt), np.array(self._vr)
