@@ -27,6 +27,7 @@ from vgm_studio.datasets.scans import Scan
 from vgm_studio.matching.matcher import MatchResult, ScanMatcher
 from vgm_studio.matching.reference_labels import LabelThresholds
 from vgm_studio.model.context import seen_by
+from vgm_studio.progress import track
 
 
 @dataclass(frozen=True)
@@ -93,6 +94,7 @@ def judge_pairs(
     scans: Sequence[Scan],
     pairs: Sequence[tuple[int, int, NDArray[np.float64]]],
     thresholds: LabelThresholds,
+    progress: bool = True,
 ) -> tuple[list[MatchResult], list[Rematch]]:
     """For every (a, b, z): the match the validator reads (see the module's docstring), and
     the re-match from z.
@@ -111,11 +113,14 @@ def judge_pairs(
     for scan in scans:
         matcher.points(scan)
     threads = usable_threads()
+    total, on = len(pairs), progress
     if threads > 1:
         with ThreadPoolExecutor(threads) as pool:
-            done = list(pool.map(one, pairs))
+            done = list(
+                track(pool.map(one, pairs), "matching edges", "edge", total=total, enabled=on)
+            )
     else:
-        done = [one(p) for p in pairs]
+        done = [one(p) for p in track(pairs, "matching edges", "edge", total=total, enabled=on)]
     return [d[0] for d in done], [d[1] for d in done]
 
 

@@ -16,7 +16,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from tqdm import tqdm
 
 from vgm_studio.audit.config import AuditConfig
 from vgm_studio.audit.group import check_loops, widened
@@ -29,6 +28,7 @@ from vgm_studio.datasets.scans import Scan
 from vgm_studio.graph.pose_graph import GraphEdge, optimize
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.model.context import DEFAULT_CONTEXT, Placements
+from vgm_studio.progress import counter
 from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.pipeline import MIN_POINTS, SlamResult, dense_reference
 from vgm_studio.slam.validation import EdgeValidator, LocalMaps
@@ -126,7 +126,7 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
     seconds["injecting"] = time.perf_counter() - t
     t = time.perf_counter()
     pairs = [(a, b, z) for a, b, z, _ in own]
-    matches, again = judge_pairs(matcher, scans, pairs, config.validation.thresholds)
+    matches, again = judge_pairs(matcher, scans, pairs, config.validation.thresholds, progress)
     seconds["matching"] = time.perf_counter() - t
     edges = [
         SlamEdge(
@@ -141,7 +141,7 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
         for (a, b, z, _), m, line in zip(own, matches, lines, strict=True)
     ]
     t = time.perf_counter()
-    judgement = _judge(inp, config, scans, edges, again)
+    judgement = _judge(inp, config, scans, edges, again, progress)
     seconds["validator"] = time.perf_counter() - t
     t = time.perf_counter()
     covariances = [cov for _, _, _, cov in own]
@@ -213,12 +213,13 @@ def _judge(
     scans: Sequence[Scan],
     edges: Sequence[SlamEdge],
     again: Sequence[Rematch],
+    progress: bool,
 ) -> _Judgement:
     """Runs the validator over the edges it can judge and reads its p as an audit does: a
     failure below the cut, where a loop's scans share enough view; else kept, for now."""
     validator = _validator(inp, config, scans, _chain_placements(inp, edges, again))
     judged = [k for k, e in enumerate(edges) if _judgeable(e, scans)]
-    bar = tqdm(total=len(judged), desc="judging edges", unit="edge", disable=None)
+    bar = counter(len(judged), "judging edges", "edge", enabled=progress)
     try:
         for k in range(0, len(judged), _CHUNK):
             chunk = [edges[i] for i in judged[k : k + _CHUNK]]
