@@ -36,13 +36,14 @@ def graph(demo, tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def audited(graph, tmp_path_factory) -> Path:
+def audited(demo, graph, tmp_path_factory) -> Path:
     """The graph audited with five injected false loops, every output written."""
     out = tmp_path_factory.mktemp("a")
     cmd.main(
         [
             "audit", str(graph),
             "--inject-false-loops", "5", "--seed", "3",
+            "--reference", str(demo),
             "--json", str(out / "audit.json"),
             "--markdown", str(out / "audit.md"),
             "--g2o", str(out / "clean.g2o"),
@@ -77,6 +78,17 @@ def test_injected_false_loops_are_flagged_and_the_graphs_own_edges_kept(audited,
         assert {"from", "to", "kind", "decision", "reason", "p_success", "injected"} <= set(e)
         assert e["reason"], e
         assert e["decision"] in ("kept", "flagged")
+
+
+def test_scored_against_the_reference_the_cleaned_graph_undoes_the_injected_damage(audited):
+    doc = _doc(audited)
+    for key in ("input", "before", "after"):
+        assert {"trans_mean", "trans_std", "rot_mean_deg", "rot_std_deg", "n"} <= set(doc[key])
+        assert doc[key]["n"] > 50
+    # Five false loops bend the graph optimised with every edge; the cleaned one is as good
+    # as the graph slam made.
+    assert doc["before"]["trans_mean"] > 2 * doc["input"]["trans_mean"]
+    assert doc["after"]["trans_mean"] <= 1.1 * doc["input"]["trans_mean"] + 0.005
 
 
 def test_every_flag_says_why_and_the_markdown_lists_the_flags(audited):
