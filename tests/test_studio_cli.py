@@ -41,11 +41,6 @@ main()
 """
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="tools/studio_cmds.py checks the port after importing the studio and torch; "
-    "the check moves before those imports there",
-)
 @pytest.mark.parametrize("command", ["label", "demo"])
 def test_a_port_in_use_is_refused_before_the_slow_start_up(command, office_edges, tmp_path):
     """The port is checked before torch, viser and scipy load (7.7 s on a cold machine)."""

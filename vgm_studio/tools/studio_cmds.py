@@ -101,14 +101,17 @@ def label(
     time_tolerance: TimeToleranceOpt = 0.05,
 ) -> None:
     """Serve a log's candidate edges (or an edges file) in the browser for labeling."""
-    from vgm_studio.labels.opening import store_to_fill
-    from vgm_studio.studio.app import StudioConfig, check_port_free, default_annotator
-    from vgm_studio.studio.serve import TrainerOptions, added_text, serve
-    from vgm_studio.workspace import check_source, choose_model, fill_workspace
+    from vgm_studio.studio.config import check_port_free
 
     folder, url = store_location(workspace, store, models_dir, Path(f"{source.stem}.studio"))
     check_host(host)
+    # Before torch, viser and the store load (seconds): a port in use is said at once.
     check_port_free(host, port)
+    from vgm_studio.labels.opening import store_to_fill
+    from vgm_studio.studio.app import StudioConfig, default_annotator
+    from vgm_studio.studio.serve import TrainerOptions, added_text, serve
+    from vgm_studio.workspace import check_source, choose_model, fill_workspace
+
     # Every cheap check before the workspace is made, and the making of candidate edges
     # (minutes on a large log): a typo costs neither a stray folder nor the wait.
     check_source(source, reference)
@@ -176,15 +179,18 @@ def demo(
     retrain_every: RetrainOpt = 25,
 ) -> None:
     """Label the bundled demo log in the browser, with the bundled model's predictions."""
-    from vgm_studio.studio.app import StudioConfig, check_port_free, default_annotator
-    from vgm_studio.studio.serve import TrainerOptions, serve
-    from vgm_studio.workspace import open_demo
+    from vgm_studio.studio.config import check_port_free
 
     start = time.perf_counter()
     folder, url = store_location(workspace, store, models_dir, Path("vgm-demo"))
     if serve_app:
         check_host(host)
+        # Before torch, viser and the store load (seconds): a port in use is said at once.
         check_port_free(host, port)
+    from vgm_studio.studio.app import StudioConfig, default_annotator
+    from vgm_studio.studio.serve import TrainerOptions, serve
+    from vgm_studio.workspace import open_demo
+
     precision = loop_precision or None
     opened, model = open_demo(
         folder, url, predict=not serve_app, precision=precision, say=typer.echo, warn=_warn
