@@ -139,9 +139,7 @@ def optimize(
     robust = robust or config.robust
     count = len(initial)
     # GNC wants plain Gaussian factors: it weights them itself.
-    graph = _graph(
-        edges, initial[anchor], "none" if robust == "gnc" else robust, config, anchor
-    )
+    graph = _graph(edges, initial[anchor], "none" if robust == "gnc" else robust, config, anchor)
     values = _values(initial)
     lm = gtsam.LevenbergMarquardtParams()
     lm.setMaxIterations(100)

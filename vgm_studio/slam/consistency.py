@@ -240,9 +240,7 @@ def _fits_estimate(loop: Loop, poses: NDArray[np.float64], rel: Relative) -> flo
     return _mahalanobis(error, vt + rel.position_var[loop.b], vr + rel.heading_var[loop.b])
 
 
-def cycle_chi2(
-    one: Loop, two: Loop, poses: NDArray[np.float64], rel: dict[int, Relative]
-) -> float:
+def cycle_chi2(one: Loop, two: Loop, poses: NDArray[np.float64], rel: dict[int, Relative]) -> float:
     """Squared Mahalanobis distance of the cycle two loops close with the graph; ``rel``
     holds the graph's uncertainty seen from ``one``'s two ends."""
     chain_b = se2.between(poses[one.b], poses[two.b])

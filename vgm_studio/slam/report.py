@@ -26,9 +26,7 @@ def keyframe_trajectories(result: SlamResult) -> dict[str, NDArray[np.float64]]:
     """The three keyframe trajectories by name: odometry (``input`` for an audited graph),
     before, after."""
     start = (
-        {"odometry": result.odometry_keyframes}
-        if result.given is None
-        else {"input": result.given}
+        {"odometry": result.odometry_keyframes} if result.given is None else {"input": result.given}
     )
     return {**start, "before": result.before.poses, "after": result.after.poses}
 
