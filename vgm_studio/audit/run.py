@@ -23,6 +23,7 @@ from vgm_studio.audit.inject import false_loops
 from vgm_studio.audit.inputs import AuditInput
 from vgm_studio.audit.judge import Rematch, judge_pairs, shared_view
 from vgm_studio.core import se2
+from vgm_studio.core.cpus import usable_threads
 from vgm_studio.datasets.g2o import G2oEdge, information_of
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.graph.pose_graph import GraphEdge, optimize
@@ -124,24 +125,33 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
             own.append((e.a, e.b, e.measurement, e.covariance))
             lines.append(0)
     seconds["injecting"] = time.perf_counter() - t
-    t = time.perf_counter()
-    pairs = [(a, b, z) for a, b, z, _ in own]
-    matches, again = judge_pairs(matcher, scans, pairs, config.validation.thresholds, progress)
-    seconds["matching"] = time.perf_counter() - t
-    edges = [
-        SlamEdge(
-            "sequential" if b == a + 1 else "loop",
-            a,
-            b,
-            z,
-            m,
-            injected=line == 0,
-            source="injected" if line == 0 else "graph",
-        )
-        for (a, b, z, _), m, line in zip(own, matches, lines, strict=True)
-    ]
-    t = time.perf_counter()
-    judgement = _judge(inp, config, scans, edges, again, progress)
+    # A graph tied to a log's scans: the validator's helper places the vertices' neighbours in
+    # the log while the pairs are matched (the matches of a graph's own scans place them).
+    inline = np.array_equal(inp.vertex_scans, np.arange(len(inp.log)))
+    early = None if inline else _validator(inp, config, scans, None, usable_threads() > 1)
+    try:
+        t = time.perf_counter()
+        pairs = [(a, b, z) for a, b, z, _ in own]
+        matches, again = judge_pairs(matcher, scans, pairs, config.validation.thresholds, progress)
+        seconds["matching"] = time.perf_counter() - t
+        edges = [
+            SlamEdge(
+                "sequential" if b == a + 1 else "loop",
+                a,
+                b,
+                z,
+                m,
+                injected=line == 0,
+                source="injected" if line == 0 else "graph",
+            )
+            for (a, b, z, _), m, line in zip(own, matches, lines, strict=True)
+        ]
+        t = time.perf_counter()
+        validator = early or _validator(inp, config, scans, _chain_placements(inp, edges, again))
+        judgement = _judge(validator, config, scans, edges, progress)
+    finally:
+        if early is not None:
+            early.close()
     seconds["validator"] = time.perf_counter() - t
     t = time.perf_counter()
     covariances = [cov for _, _, _, cov in own]
@@ -208,16 +218,14 @@ class _Judgement:
 
 
 def _judge(
-    inp: AuditInput,
+    validator: EdgeValidator,
     config: AuditConfig,
     scans: Sequence[Scan],
     edges: Sequence[SlamEdge],
-    again: Sequence[Rematch],
     progress: bool,
 ) -> _Judgement:
     """Runs the validator over the edges it can judge and reads its p as an audit does: a
     failure below the cut, where a loop's scans share enough view; else kept, for now."""
-    validator = _validator(inp, config, scans, _chain_placements(inp, edges, again))
     judged = [k for k, e in enumerate(edges) if _judgeable(e, scans)]
     bar = counter(len(judged), "judging edges", "edge", enabled=progress)
     try:
@@ -247,26 +255,29 @@ def _judge(
 
 
 def _validator(
-    inp: AuditInput, config: AuditConfig, scans: Sequence[Scan], placed: Placements | None
+    inp: AuditInput,
+    config: AuditConfig,
+    scans: Sequence[Scan],
+    placed: Placements | None,
+    ahead: bool = False,
 ) -> EdgeValidator:
     reference = dense_reference(inp.log, inp.scan_poses)
+    local = LocalMaps(inp.log.scans, inp.scan_poses, inp.vertex_scans, ahead, placed)
     return EdgeValidator(
         config.validation,
         scans,
         None if reference is None else reference[inp.vertex_scans],
-        LocalMaps(inp.log.scans, inp.scan_poses, inp.vertex_scans, placed=placed),
+        local,
     )
 
 
 def _chain_placements(
     inp: AuditInput, edges: Sequence[SlamEdge], again: Sequence[Rematch]
-) -> Placements | None:
-    """Where a graph's own scans are the log, a vertex's neighbours in a local map are the
+) -> Placements:
+    """Of a graph's own scans (the log), a vertex's neighbours in a local map are the
     vertices next to it, and the re-matches of the sequential edges have placed them already:
     each neighbour up to ``_REACH`` steps along, composed over steps that all held (as
     ``LocalMapper.placed`` holds a match). It spares a match per neighbour, four per vertex."""
-    if not np.array_equal(inp.vertex_scans, np.arange(len(inp.log))):
-        return None
     floor = DEFAULT_CONTEXT.min_inliers
     step: dict[int, NDArray[np.float64] | None] = {}
     for e, r in zip(edges, again, strict=True):
