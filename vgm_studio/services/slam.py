@@ -130,7 +130,8 @@ def run_slam_command(
     seconds = time.perf_counter() - start
     if outputs.json is not None:
         settings = json.loads(json.dumps(asdict(config), default=str))
-        write_json(outputs.json, summary(result, errors, settings, seconds))
+        doc = summary(result, errors, settings, seconds, source.log, source.params.get("read"))
+        write_json(outputs.json, doc)
         say(f"wrote {outputs.json}")
     say(f"done in {seconds:.1f} s")
 

@@ -5,18 +5,22 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from vgm_studio.core import se2
 from vgm_studio.datasets.relations import MatchedRelation
 from vgm_studio.datasets.scans import ScanLog
 from vgm_studio.graph.metrics import RelationErrors, relation_errors
 from vgm_studio.maps.config import MapConfig
 from vgm_studio.maps.occupancy import OccupancyGrid, build_map
+from vgm_studio.matching.edges import edge_id
+from vgm_studio.matching.reference_labels import LabelThresholds, reference_label
 from vgm_studio.slam.edges import LOOP_SOURCES, SlamEdge
-from vgm_studio.slam.pipeline import SlamResult
+from vgm_studio.slam.pipeline import SlamResult, dense_reference
 
 TRAJECTORIES = ("odometry", "before", "after")
 _SOURCES = (*LOOP_SOURCES, "injected")
@@ -121,8 +125,16 @@ def summary(
     errors: dict[str, RelationErrors] | None,
     settings: dict[str, Any],
     seconds: float,
+    log: ScanLog | None = None,
+    read: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """The ``--json`` document."""
+    """The ``--json`` document.
+
+    With ``log`` it also says which log the run read and where its keyframes lie
+    (``run_identity``), and each edge its scans (``scan_edges``): ``vgm-studio compare``
+    matches two runs' loops by those scans, since two runs of one log may pick other
+    keyframes.
+    """
     counts = EdgeCounts.of(result)
     out: dict[str, Any] = {}
     if errors is not None:
@@ -152,6 +164,9 @@ def summary(
             "edges": [edge_json(e) for e in result.edges],
         }
     )
+    if log is not None:
+        out.update(run_identity(log, result, read))
+        scan_edges(out["edges"], log, result)
     finite: dict[str, Any] = finite_json(out)
     return finite
 
@@ -170,6 +185,51 @@ def edge_json(edge: SlamEdge) -> dict[str, Any]:
         "kept": edge.kept,
         "estimate": [float(v) for v in edge.estimate],
     }
+
+
+def run_identity(log: ScanLog, result: SlamResult, read: dict[str, Any] | None) -> dict[str, Any]:
+    """Which log a run read (its content hash: the same bytes under any path) and how, the
+    keyframes' scan indices and timestamps, and the after poses of the keyframes.
+
+    ``compare`` refuses two runs of different logs by the hash, matches keyframes across
+    runs by scan, and draws the after maps from these poses and the log's scans.
+    """
+    return {
+        "log": {
+            "path": str(Path(log.path).resolve()),
+            "sha256": log.content_hash,
+            "mount": "" if log.mount is None else log.mount.id_text(),
+            "read": read or {},
+        },
+        "keyframe_scans": [int(k) for k in result.keyframes],
+        "keyframe_times": [float(log.scans[int(k)].timestamp) for k in result.keyframes],
+        "after_poses": [[float(v) for v in pose] for pose in result.after.poses],
+    }
+
+
+def scan_edges(edges: list[dict[str, Any]], log: ScanLog, result: SlamResult) -> None:
+    """Adds each edge's log scans (``scan_a``, ``scan_b``) to its JSON entry, and to each
+    loop the id ``--loops-out`` and the studio give it (``matching.edges.edge_id``).
+
+    Where the log has reference poses, each loop also gets ``reference_error`` (metres,
+    degrees) and ``reference_label``: success, failure or ambiguous by those distances alone
+    (``--loops-out`` also checks a failure against the scans, which costs a match each).
+    """
+    mount = "" if log.mount is None else log.mount.id_text()
+    reference = dense_reference(log, result.odometry)
+    thresholds = LabelThresholds()
+    for doc, e in zip(edges, result.edges, strict=True):
+        a, b = int(result.keyframes[e.a]), int(result.keyframes[e.b])
+        doc["scan_a"], doc["scan_b"] = a, b
+        if e.kind != "loop":
+            continue
+        doc["edge_id"] = edge_id(log.content_hash, a, b, [float(v) for v in e.estimate], mount)
+        if reference is None:
+            continue
+        relative = se2.between(reference[a], reference[b])
+        exy, eth = se2.pose_error(relative, e.estimate)
+        doc["reference_error"] = [float(exy), math.degrees(eth)]
+        doc["reference_label"] = reference_label(relative, e.estimate, thresholds)
 
 
 def finite_json(value: Any) -> Any:
