@@ -30,6 +30,7 @@ STAGES = {
     "slam": 5,
     "workspace": 6,
     "audit": 6,
+    "compare": 6,
     "recording": 6,
     "studio": 7,
     "services": 7,

@@ -16,6 +16,7 @@ from vgm_studio.datasets import ReadOptions
 from vgm_studio.errors import exit_on_error
 from vgm_studio.tools import (
     audit_cmd,
+    compare_cmd,
     fleet_cmd,
     model_cmds,
     slam_cmd,
@@ -286,6 +287,7 @@ app.command("import")(studio_cmds.import_)
 app.command("agreement")(studio_cmds.agreement)
 app.command("slam")(slam_cmd.slam)
 app.command("audit")(audit_cmd.audit)
+app.command("compare")(compare_cmd.compare)
 app.command("fleet")(fleet_cmd.fleet)
 app.command("trainer")(trainer_cmds.trainer)
 app.command("models")(trainer_cmds.models)
