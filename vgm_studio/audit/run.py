@@ -11,7 +11,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,24 +20,21 @@ from vgm_studio.audit.config import AuditConfig
 from vgm_studio.audit.group import check_loops, widened
 from vgm_studio.audit.inject import false_loops
 from vgm_studio.audit.inputs import AuditInput
-from vgm_studio.audit.judge import Rematch, judge_pairs, shared_view
+from vgm_studio.audit.judge import Rematch, judge_pairs
+from vgm_studio.audit.verdicts import (
+    Reasons,
+    chain_placements,
+    judge_edges,
+    make_validator,
+)
 from vgm_studio.core import se2
 from vgm_studio.core.cpus import usable_threads
 from vgm_studio.datasets.g2o import G2oEdge, information_of
-from vgm_studio.datasets.scans import Scan
 from vgm_studio.graph.pose_graph import GraphEdge, optimize
 from vgm_studio.matching.matcher import ScanMatcher
-from vgm_studio.model.context import DEFAULT_CONTEXT, Placements
-from vgm_studio.progress import counter
 from vgm_studio.slam.edges import SlamEdge
-from vgm_studio.slam.pipeline import MIN_POINTS, SlamResult, dense_reference
-from vgm_studio.slam.validation import EdgeValidator, LocalMaps
+from vgm_studio.slam.pipeline import SlamResult
 
-# Neighbours placed from the chain, in steps: past the Killian graph's 0.5 m spacing, two
-# neighbours a side within a local map's 2 m reach.
-_REACH = 4
-# Edges the validator reads at once: its batches fill, and the bar moves often enough.
-_CHUNK = 512
 # Ties consecutive vertices that no edge of a graph joins, so a graph whose flagged loops
 # held two parts together still solves; too wide to move anything.
 _UNTIED = np.diag([1e3**2, 1e3**2, 1e2**2])
@@ -128,7 +124,7 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
     # A graph tied to a log's scans: the validator's helper places the vertices' neighbours in
     # the log while the pairs are matched (the matches of a graph's own scans place them).
     inline = np.array_equal(inp.vertex_scans, np.arange(len(inp.log)))
-    early = None if inline else _validator(inp, config, scans, None, usable_threads() > 1)
+    early = None if inline else make_validator(inp, config, scans, None, usable_threads() > 1)
     try:
         t = time.perf_counter()
         pairs = [(a, b, z) for a, b, z, _ in own]
@@ -147,8 +143,8 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
             for (a, b, z, _), m, line in zip(own, matches, lines, strict=True)
         ]
         t = time.perf_counter()
-        validator = early or _validator(inp, config, scans, _chain_placements(inp, edges, again))
-        judgement = _judge(validator, config, scans, edges, progress)
+        validator = early or make_validator(inp, config, scans, chain_placements(inp, edges, again))
+        judgement = judge_edges(validator, config, scans, edges, progress)
     finally:
         if early is not None:
             early.close()
@@ -172,7 +168,7 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
     cleaned = _with_ties([f for f in kept if f is not None], len(graph))
     after = optimize(graph.poses, cleaned, config.graph, anchor=anchor)
     seconds["back_end"] = time.perf_counter() - t
-    reasons = _Reasons(judgement, rescued, scans)
+    reasons = Reasons(judgement, rescued, scans)
     verdicts = [
         Verdict(e, cov, line, reasons(k, e), r)
         for k, (e, cov, line, r) in enumerate(zip(edges, covariances, lines, again, strict=True))
@@ -190,113 +186,6 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
         given=graph.poses,
     )
     return AuditResult(inp, run, verdicts, seconds)
-
-
-@dataclass
-class _Judgement:
-    """The validator's word on every edge, and what the audit read it against.
-
-    Attributes:
-        threshold: The checkpoint's threshold (NaN without a model).
-        cut: Under this p a pair's scans fail (``AuditConfig.flag_below``).
-        bar: The loop cut of validation: at or over it a loop is sure.
-        views: Each judged loop's shared view (``judge.shared_view``), by edge index.
-        min_view: Under this the scans cannot judge a loop.
-    """
-
-    threshold: float
-    cut: float
-    bar: float
-    views: dict[int, float]
-    min_view: float
-
-    def unsure(self, k: int, edge: SlamEdge) -> bool:
-        """A loop the validator passed without vouching for it."""
-        if edge.kind != "loop" or math.isnan(edge.p_success):
-            return False
-        return not edge.p_success >= self.bar or self.views.get(k, 1.0) < self.min_view
-
-
-def _judge(
-    validator: EdgeValidator,
-    config: AuditConfig,
-    scans: Sequence[Scan],
-    edges: Sequence[SlamEdge],
-    progress: bool,
-) -> _Judgement:
-    """Runs the validator over the edges it can judge and reads its p as an audit does: a
-    failure below the cut, where a loop's scans share enough view; else kept, for now."""
-    judged = [k for k, e in enumerate(edges) if _judgeable(e, scans)]
-    bar = counter(len(judged), "judging edges", "edge", enabled=progress)
-    try:
-        for k in range(0, len(judged), _CHUNK):
-            chunk = [edges[i] for i in judged[k : k + _CHUNK]]
-            validator(chunk)
-            bar.update(len(chunk))
-    finally:
-        bar.close()
-        validator.close()
-    threshold = validator.threshold
-    cut = config.flag_below if config.flag_below is not None else threshold
-    loop_bar = validator.loop_bar
-    views: dict[int, float] = {}
-    if not math.isnan(cut):
-        margin = DEFAULT_CONTEXT.view_margin
-        for i in judged:
-            e = edges[i]
-            failed = e.p_success < cut
-            if e.kind == "loop":
-                views[i] = shared_view(scans[e.a], scans[e.b], e.estimate, margin)
-                failed = failed and views[i] >= config.min_shared_view
-            e.validated = e.kept = not failed
-    return _Judgement(
-        threshold, cut, math.nan if loop_bar is None else loop_bar, views, config.min_shared_view
-    )
-
-
-def _validator(
-    inp: AuditInput,
-    config: AuditConfig,
-    scans: Sequence[Scan],
-    placed: Placements | None,
-    ahead: bool = False,
-) -> EdgeValidator:
-    reference = dense_reference(inp.log, inp.scan_poses)
-    local = LocalMaps(inp.log.scans, inp.scan_poses, inp.vertex_scans, ahead, placed)
-    return EdgeValidator(
-        config.validation,
-        scans,
-        None if reference is None else reference[inp.vertex_scans],
-        local,
-    )
-
-
-def _chain_placements(
-    inp: AuditInput, edges: Sequence[SlamEdge], again: Sequence[Rematch]
-) -> Placements:
-    """Of a graph's own scans (the log), a vertex's neighbours in a local map are the
-    vertices next to it, and the re-matches of the sequential edges have placed them already:
-    each neighbour up to ``_REACH`` steps along, composed over steps that all held (as
-    ``LocalMapper.placed`` holds a match). It spares a match per neighbour, four per vertex."""
-    floor = DEFAULT_CONTEXT.min_inliers
-    step: dict[int, NDArray[np.float64] | None] = {}
-    for e, r in zip(edges, again, strict=True):
-        if e.kind == "sequential":
-            holds = r.converged and r.inlier_ratio >= floor
-            step[e.a] = r.match.estimate if holds else None
-    placed: Placements = {}
-    for k in range(len(inp.log)):
-        pose: NDArray[np.float64] | None = np.zeros(3)
-        for j in range(k + 1, min(k + 1 + _REACH, len(inp.log))):
-            s = step.get(j - 1)
-            pose = None if pose is None or s is None else se2.compose(pose, s)
-            placed[(k, j)] = pose
-            placed[(j, k)] = None if pose is None else se2.inverse(pose)
-    return placed
-
-
-def _judgeable(edge: SlamEdge, scans: Sequence[Scan]) -> bool:
-    return min(len(scans[edge.a].points()), len(scans[edge.b].points())) >= MIN_POINTS
 
 
 def _edges(
@@ -331,47 +220,3 @@ def _kept_factor(
         # The chain stays whole: the step goes in at an odometry step's width.
         return GraphEdge(edge.a, edge.b, edge.guess, widened(edge, config.graph), True)
     return None
-
-
-class _Reasons:
-    """Why each edge was kept or flagged, in a line a person reads."""
-
-    def __init__(
-        self, judgement: _Judgement, rescued: dict[int, int], scans: Sequence[Scan]
-    ) -> None:
-        self._j, self._rescued, self._scans = judgement, rescued, scans
-
-    def __call__(self, k: int, e: SlamEdge) -> str:
-        j = self._j
-        if not _judgeable(e, self._scans):
-            fewest = min(len(self._scans[e.a].points()), len(self._scans[e.b].points()))
-            return f"not judged: a scan with {fewest} points"
-        if math.isnan(e.p_success):
-            return "kept: no validator" if e.kept else "flagged"
-        p = f"p {e.p_success:.2f}"
-        view = j.views.get(k)
-        if k in self._rescued:
-            return (
-                f"kept: the scans fail ({p} < {j.cut:.2f}), but {self._rescued[k]} loops near "
-                "it close consistent cycles with it"
-            )
-        if not e.validated:
-            if e.kind == "sequential":
-                return (
-                    f"validator: {p} < {j.cut:.2f}; kept in the chain at an odometry step's width"
-                )
-            return (
-                f"validator: {p} < {j.cut:.2f} with {view or 0:.0%} of the view shared, "
-                "and no loop near it agrees"
-            )
-        if e.consistency == "rejected":
-            return f"consistency: disagrees with the loops near it and the chain ({p})"
-        if e.kind == "sequential":
-            return f"kept: {p}"
-        if view is not None and view < j.min_view and e.p_success < j.cut:
-            return (
-                f"kept: the scans share {view:.0%} of their view, too little to judge ({p}); "
-                "consistent with the loops near it"
-            )
-        sure = "" if e.p_success >= j.bar else " (unsure)"
-        return f"kept: {p}{sure}; consistent with the loops near it"
