@@ -43,6 +43,7 @@ class SlamOutputs:
         ros_map: A folder for the after map as ROS map_server loads it (``maps.ros_map``).
         g2o: The after graph as a g2o 2D file, each keyframe with its scan
             (``datasets.g2o``).
+        loops_injected: ``loops`` holds the injected false loops too.
     """
 
     json: Path | None = None
@@ -53,6 +54,7 @@ class SlamOutputs:
     trajectory: Path | None = None
     ros_map: Path | None = None
     g2o: Path | None = None
+    loops_injected: bool = False
 
 
 def validator_model(validator: str, model: Path | None) -> Path | None:
@@ -126,7 +128,7 @@ def run_slam_command(
     )
     write_run_files(source.log, result, errors, config.maps, files, voice)
     if outputs.loops is not None:
-        _write_loops(outputs.loops, source, result, say)
+        _write_loops(outputs.loops, source, result, say, outputs.loops_injected)
     seconds = time.perf_counter() - start
     if outputs.json is not None:
         settings = json.loads(json.dumps(asdict(config), default=str))
@@ -136,8 +138,10 @@ def run_slam_command(
     say(f"done in {seconds:.1f} s")
 
 
-def _write_loops(path: Path, source: LogSource, result: SlamResult, say: Say) -> None:
-    edges = loop_edges(source.log, result, source.params)
+def _write_loops(
+    path: Path, source: LogSource, result: SlamResult, say: Say, injected: bool = False
+) -> None:
+    edges = loop_edges(source.log, result, source.params, injected=injected)
     write_edges(path, edges)
     labels = Counter(e.label or "unlabelled" for e in edges)
     say(

@@ -47,6 +47,8 @@ class SlamEdge:
         overlap: Turned loops the validator's network rejected: the share of b's trail that
             lies on a's submap at the estimate (``FrontEndConfig.turned_overlap``); NaN
             where not measured.
+        group: The consistency check the loop was judged in (loops checked together share
+            it, numbered from 0 in the order the run checked them); None where unchecked.
     """
 
     kind: SlamEdgeKind
@@ -61,6 +63,7 @@ class SlamEdge:
     validated: bool = True
     consistency: Consistency = "not-checked"
     overlap: float = math.nan
+    group: int | None = None
 
     @property
     def estimate(self) -> NDArray[np.float64]:

@@ -165,6 +165,7 @@ class FrontEnd:
         self._pool: ThreadPoolExecutor | None = None
         self.estimate = RunningEstimate(odometry[0], graph)
         self.edges: list[SlamEdge] = []
+        self._checks = 0  # consistency checks made: each one's loops share a group
         self._false = false_loop_pairs(odometry, config) if config.false_loops else {}
         # Keyframe → the estimate its loop search read (the final sweep's baseline): a copy
         # per block, about 1 MB over Intel's 1,496 keyframes, growing with the run's square.
@@ -405,6 +406,8 @@ class FrontEnd:
         for e, ok in zip(loops, flags, strict=True):
             e.consistency = "kept" if ok else "rejected"
             e.kept = bool(ok)
+            e.group = self._checks
+        self._checks += 1
 
     def _checked_as(self, edge: SlamEdge, factor: GraphEdge) -> GraphEdge:
         """A sequential edge as the consistency check reads the chain: a match that lies

@@ -10,6 +10,7 @@ them one by one, or train on it.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -30,14 +31,18 @@ def loop_edges(
     params: dict[str, Any],
     thresholds: LabelThresholds | None = None,
     chosen: Sequence[SlamEdge] | None = None,
+    injected: bool = False,
 ) -> list[Edge]:
-    """The run's matched loops (injected false loops left out) as edges between log scans;
-    ``chosen`` names other edges of the run instead (an audit's flagged ones).
+    """The run's matched loops (injected false loops left out unless ``injected``) as edges
+    between log scans; ``chosen`` names other edges of the run instead (an audit's flagged
+    ones).
 
     Each edge's ``match`` holds the loop matcher's figures and, under ``slam``, the run's own
-    view of it: where the candidate came from, p(success), the validator's and the consistency
-    check's decisions, and the keyframe indices. With reference poses each edge is labelled
-    as ``candidates`` labels its edges (a failure the scans contradict is ambiguous).
+    view of it (``decisions``): where the candidate came from, p(success) and the cut it was
+    held to, the validator's and the consistency check's decisions and the check's group,
+    whether it went into the graph, the after graph's residual on it, and the keyframe
+    indices. With reference poses each edge is labelled as ``candidates`` labels its edges (a
+    failure the scans contradict is ambiguous).
 
     Args:
         log: The log the run read, with its reference poses where it has them.
@@ -45,6 +50,9 @@ def loop_edges(
         params: How the log was read (``LogSource.params``), kept with every edge so the
             studio reopens the log the same way.
         thresholds: Label thresholds.
+        chosen: The run's edges to write, instead of its matched loops.
+        injected: Write the injected false loops too (``--inject-false-loops``): in the
+            studio they show what the run made of a loop known to be wrong.
     """
     thresholds = thresholds or LabelThresholds()
     reference = dense_reference(log, result.odometry)
@@ -56,12 +64,17 @@ def loop_edges(
         chosen = [
             e
             for e in result.edges
-            if e.kind == "loop" and not e.injected and e.match.covariance is not None
+            if e.kind == "loop" and (injected or not e.injected) and e.match.covariance is not None
         ]
+    groups = Counter(e.group for e in result.edges if e.group is not None)
+    kept_in = Counter(e.group for e in result.edges if e.group is not None and e.kept)
     for e in chosen:
         a, b = int(result.keyframes[e.a]), int(result.keyframes[e.b])
         estimate = [float(v) for v in e.estimate]
-        figures = {**e.match.figures(), "slam": _decisions(e)}
+        group = None
+        if e.group is not None:
+            group = {"id": e.group, "checked": groups[e.group], "kept": kept_in[e.group]}
+        figures = {**e.match.figures(), "slam": decisions(e, result, group)}
         label: Label | None = None
         relative = None
         if reference is not None:
@@ -91,12 +104,31 @@ def loop_edges(
     return out
 
 
-def _decisions(e: SlamEdge) -> dict[str, Any]:
+def decisions(e: SlamEdge, result: SlamResult, group: dict[str, int] | None) -> dict[str, Any]:
+    """What the run decided about ``e``, as ``match["slam"]`` holds it.
+
+    ``cut`` is the p(success) a loop needed (the run's loop bar, else the model's threshold;
+    None without a model). ``residual`` is how far the after graph's relative pose of the two
+    keyframes lies from the edge's measurement (metres, degrees): small where the graph took
+    the edge in, large where the edge fought the rest of the graph or was left out and the
+    graph went elsewhere. ``group`` is the consistency check the loop was judged in: its
+    number in the run, how many loops it checked and how many it kept.
+    """
+    bar = result.loop_bar if result.loop_bar is not None else result.threshold
+    after = result.after.poses
+    residual = None
+    if max(e.a, e.b) < len(after):
+        xy, theta = se2.pose_error(se2.between(after[e.a], after[e.b]), e.estimate)
+        residual = {"metres": float(xy), "degrees": math.degrees(float(theta))}
     return {
         "source": e.source,
         "p_success": None if math.isnan(e.p_success) else e.p_success,
+        "cut": None if bar is None or math.isnan(bar) else float(bar),
         "validated": e.validated,
         "kept": e.kept,
         "consistency": e.consistency,
+        "group": group,
+        "injected": e.injected,
+        "residual": residual,
         "keyframes": [e.a, e.b],
     }

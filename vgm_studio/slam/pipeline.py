@@ -43,6 +43,9 @@ class SlamResult:
             that stands in for each rejected sequential one (a g2o export writes these).
         given: (K, 3) the keyframe poses an audited graph came with: its maps, recording and
             relation errors then start from ``input``, not the odometry.
+        loop_bar: The p(success) a loop was held to (``EdgeValidator.loop_bar``: the highest
+            of the model's threshold, the loop threshold and the precision cut); None where
+            the validator gives no p or the run did not record it.
     """
 
     keyframes: NDArray[np.int64]
@@ -56,6 +59,7 @@ class SlamResult:
     isam2_restarts: int = 0
     after_edges: list[GraphEdge] = field(default_factory=list)
     given: NDArray[np.float64] | None = None
+    loop_bar: float | None = None
 
     @property
     def odometry_keyframes(self) -> NDArray[np.float64]:
@@ -209,4 +213,5 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
         seconds=seconds,
         isam2_restarts=front.estimate.restarts,
         after_edges=after_edges,
+        loop_bar=validator.loop_bar,
     )

@@ -111,6 +111,14 @@ def slam(
             "reference labels: open it in the studio, or train on it.",
         ),
     ] = None,
+    loops_injected: Annotated[
+        bool,
+        typer.Option(
+            "--loops-injected",
+            help="With --loops-out and --inject-false-loops: write the injected false loops "
+            "too (source injected), to see in the studio what the run made of them.",
+        ),
+    ] = False,
     keyframe_distance: Annotated[float, positive("Keyframe every this many metres (> 0).")] = 0.5,
     keyframe_angle: Annotated[float, positive("…or this many degrees (> 0).")] = 20.0,
     loop_radius: Annotated[
@@ -191,6 +199,7 @@ def slam(
             trajectory=trajectory,
             ros_map=ros_map,
             g2o=g2o,
+            loops_injected=loops_injected,
         ),
         voice=Voice(typer.echo, lambda line: typer.echo(line, err=True)),
     )
