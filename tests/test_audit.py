@@ -267,6 +267,7 @@ def test_careless_audit_commands_get_one_line(graph, demo, tmp_path, capsys):
         (["audit", str(bare)], "--scans"),
         (["audit", str(bare), "--scans", str(demo)], "--vertex-times"),
         (["audit", str(graph), "--vertex-index", "scan"], "--scans"),
+        (["audit", str(demo)], "this is a log, not a pose graph"),
         (["audit", str(bare), "--scans", str(demo), "--vertex-index", "scan",
           "--vertex-times", str(bare)], "not both"),
     ]  # fmt: skip

@@ -40,6 +40,8 @@ GraphFormat = Literal["g2o", "toro"]
 # Upper-triangle positions (row, column) of the six information entries, in file order.
 _G2O_ORDER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 _TORO_ORDER = ((0, 0), (0, 1), (1, 1), (2, 2), (0, 2), (1, 2))
+# What a CARMEN log holds: given where a graph is due, say so rather than quote a stray line.
+_LOG_MESSAGES = frozenset({"PARAM", "SYNC", "FLASER", "RLASER", "ODOM", "TRUEPOS", "NEFF"})
 _KNOWN = {
     "g2o": ("VERTEX_SE2", "EDGE_SE2", "FIX", "ROBOTLASER1"),
     "toro": ("VERTEX2", "EDGE2", "FIX"),
@@ -136,6 +138,13 @@ class _Reader:
         p = LineParser(self.path, lineno, tokens)
         fmt: GraphFormat = "toro" if kind in ("VERTEX2", "EDGE2") else "g2o"
         if kind not in _KNOWN["g2o"] + _KNOWN["toro"]:
+            if kind in _LOG_MESSAGES and not self.vertices:
+                raise InputError(
+                    self.path,
+                    f"{kind} is a CARMEN log's line: this is a log, not a pose graph (give the "
+                    "graph, and this log with --scans)",
+                    line=lineno,
+                )
             raise InputError(
                 self.path,
                 f"{quote_token(kind)} is not a line of a 2D pose graph (g2o: VERTEX_SE2, "
