@@ -224,10 +224,14 @@ def same_subject(base: Run, new: Run) -> None:
         InputError: Naming the NEW file and what differs.
     """
     if base.kind != new.kind:
-        raise InputError(new.path, f"a {new.kind} run, but {base.path} is a {base.kind} run")
+        raise InputError(new.path, f"{_a(new.kind)} run, but {base.path} is {_a(base.kind)} run")
     if base.identity != new.identity:
         raise InputError(
             new.path,
             f"a run of {new.subject}, but {base.path} is a run of {base.subject}: "
             "compare two runs of one log",
         )
+
+
+def _a(kind: str) -> str:
+    return f"an {kind}" if kind[0] in "aeiou" else f"a {kind}"
