@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from vgm_studio.errors import InputError
-from vgm_studio.tools.options import non_negative, png_file, positive
+from vgm_studio.tools.options import png_file, positive
 
 _RULES_HELP = (
     "Rules, NAME=LIMIT joined by commas; exit 1 when one fails. error-increase and "
@@ -55,7 +55,11 @@ def compare(
         ),
     ] = 5,
     moved: Annotated[
-        float, positive("A keyframe moved when its after pose differs by more, metres (> 0).")
+        float,
+        positive(
+            "A keyframe (at a scan both runs made one of) moved when its after pose differs "
+            "by more, metres (> 0), or turned by more than 2°."
+        ),
     ] = 0.10,
     png: Annotated[
         Path | None,
@@ -85,7 +89,7 @@ def compare(
             "(checked by content hash).",
         ),
     ] = None,
-    resolution: Annotated[float, non_negative("Map cell edge for --png, metres.")] = 0.05,
+    resolution: Annotated[float, positive("Map cell edge for --png, metres (> 0).")] = 0.05,
 ) -> None:
     """Compare two runs of one log: relation errors, loops by scan pair, moved keyframes.
 
@@ -99,7 +103,7 @@ def compare(
     config = CompareConfig(
         noise=Noise(floor_m=floor, share=share), scan_tolerance=scan_tolerance, moved_m=moved
     )
-    outputs = CompareOutputs(png, markdown, studio_url, log, resolution or 0.05)
+    outputs = CompareOutputs(png, markdown, studio_url, log, resolution)
     voice = Voice(say=typer.echo, warn=lambda line: typer.echo(line, err=True))
     try:
         result = run_compare(base, new, config, fail_on, outputs, voice)
