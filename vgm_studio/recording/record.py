@@ -167,12 +167,28 @@ def _colour(edge: SlamEdge) -> str:
 
 
 def _vgm_png(log: ScanLog, result: SlamResult, edge: SlamEdge) -> bytes:
+    """The pair's VGM as a PNG, cropped to its occupied cells.
+
+    A recording holds one per loop (over a thousand on Intel): the whole 400 × 400 grid,
+    mostly empty, colourised and compressed took 11 ms a pair and most of the recording's
+    time; the occupied rectangle at PNG's fastest level takes a tenth of that.
+    """
     prev = log.scans[result.keyframes[edge.a]].points()
     cur = log.scans[result.keyframes[edge.b]].points()
-    image = cv2.cvtColor(heatmap(pair_map(prev, cur, edge.estimate)), cv2.COLOR_BGR2RGB)
-    ok, png = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 6])
+    image = cv2.cvtColor(heatmap(_occupied(pair_map(prev, cur, edge.estimate))), cv2.COLOR_BGR2RGB)
+    ok, png = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 1])
     assert ok, "opencv failed to encode a VGM picture"
     return png.tobytes()
+
+
+def _occupied(vgm: NDArray[np.float32], margin: int = 4) -> NDArray[np.float32]:
+    """The (2, H, W) VGM cut to the rectangle of its occupied cells, ``margin`` cells wider."""
+    occupied = (vgm[0] > 0) | (vgm[1] > 0)
+    rows, cols = np.flatnonzero(occupied.any(axis=1)), np.flatnonzero(occupied.any(axis=0))
+    if len(rows) == 0:
+        return vgm
+    r0, c0 = max(rows[0] - margin, 0), max(cols[0] - margin, 0)
+    return vgm[:, r0 : rows[-1] + margin + 1, c0 : cols[-1] + margin + 1]
 
 
 def _verdict(edge: SlamEdge) -> str:
