@@ -19,7 +19,9 @@ from vgm_studio.labels.store import LabelStore
 from vgm_studio.matching.edge_scans import EdgeScans
 from vgm_studio.matching.edges import Edge
 from vgm_studio.studio.config import StudioConfig, check_port_free, default_annotator
+from vgm_studio.studio.decisions import decision_rows, run_header, run_of
 from vgm_studio.studio.gate import Gate, guarded_serve, is_loopback, new_token
+from vgm_studio.studio.links import first_link, opening, requested
 from vgm_studio.studio.panel import (
     agreement_text,
     ask_training,
@@ -30,7 +32,7 @@ from vgm_studio.studio.panel import (
     plain,
     position_text,
 )
-from vgm_studio.studio.queues import Queue, Snapshot, order
+from vgm_studio.studio.queues import RUN_QUEUES, Queue, Snapshot, order
 from vgm_studio.studio.scene import Layers, TabScene
 from vgm_studio.studio.tab import Tab
 from vgm_studio.studio.team import StoreLink
@@ -65,8 +67,11 @@ class Studio:
         self.store = store
         self.config = config
         self._views = ViewCache(scans or EdgeScans(), config.vgm)
-        self._edge_ids = store.edge_ids()
-        self._edges: dict[str, Edge] = {}
+        edges = store.edges()  # read once: a run's decisions and reference labels stay put
+        self._edge_ids = [e.edge_id for e in edges]
+        self._edges: dict[str, Edge] = {e.edge_id: e for e in edges}
+        self._run = run_of(edges)
+        self.queues = [q for q in Queue if self._run.kept or q not in RUN_QUEUES]
         self._predictions = store.predictions()
         self._scoring: tuple[int, int] | None = None  # (done, total) while a model scores
         self._tabs: dict[int, Tab] = {}
@@ -82,11 +87,11 @@ class Studio:
 
     @property
     def url(self) -> str:
-        host = "localhost" if self.config.host in ("127.0.0.1", "0.0.0.0") else self.config.host
-        if ":" in host:
-            host = f"[{host}]"
-        path = Gate(self.config.host, self.config.token).page_path
-        return f"http://{host}:{self.config.port}{path}"
+        return Gate(self.config.host, self.config.token).url(self.config.port)
+
+    def first_link(self) -> str | None:
+        """A link to the first edge of the most telling queue (``links.first_link``)."""
+        return first_link(self.url, self._snapshot(), self.queues)
 
     def start(self) -> viser.ViserServer:
         """Starts serving; returns at once (the server runs in its own threads).
@@ -171,9 +176,9 @@ class Studio:
 
     # -- tabs ----------------------------------------------------------------------------
 
-    def _snapshot(self) -> Snapshot:
-        preds = self._predictions
-        return Snapshot(self._edge_ids, self.store.label_map(), preds.p, preds.threshold)
+    def _snapshot(self, labels: dict[str, dict[str, str]] | None = None) -> Snapshot:
+        p, labels = self._predictions, self.store.label_map() if labels is None else labels
+        return Snapshot(self._edge_ids, labels, p.p, p.threshold, self._run)
 
     def _tab_actions(self, tab: Tab) -> dict[str, Callable[[], None]]:
         return {
@@ -191,24 +196,22 @@ class Studio:
 
     def _connect(self, client: viser.ClientHandle) -> None:
         actions: dict[str, Callable[[], None]] = {}
-        panel = build_panel(client, self.config.annotator, self.config.queue, actions)
+        start = opening(requested(self.server, client.client_id), self.config.queue,
+                        self._snapshot(), self.queues)  # fmt: skip
+        panel = build_panel(client, self.config.annotator, start.queue, actions, self.queues)
         panel.trainer.content = self._trainer_text
         panel.layers.content = layers_text(Layers.both.value)
-        tab = Tab(
-            client,
-            panel,
-            self.config.queue,
-            order(self.config.queue, self._snapshot()),
-            TabScene(client),
-        )
+        tab = Tab(client, panel, start.queue, start.order, TabScene(client))
         actions.update(self._tab_actions(tab))
         panel.queue.on_update(lambda _e: self._switch_queue(tab, Queue(panel.queue.value)))
         panel.show_guess.on_update(lambda _e: self._redraw(tab))
         client.camera.on_update(lambda _camera: self._lens_changed(tab))
         with tab.lock:
             self._tabs[client.client_id] = tab
-            tab.index = -1
-            self._move(tab, +1)
+            tab.index = -1 if start.index is None else start.index
+            self._move(tab, +1 if start.index is None else 0)
+        if start.note:
+            client.add_notification("Link", start.note, auto_close_seconds=6.0)
 
     def _disconnect(self, client: viser.ClientHandle) -> None:
         with self._lock:
@@ -350,9 +353,10 @@ class Studio:
                 self._show_edge(tab, edge_id, labels.get(edge_id, {}), draw_scene)
             panel.progress.value = 100.0 * labelled / max(len(self._edge_ids), 1)
             # Last: the position line changing tells a watcher that the whole edge is there.
-            panel.position.content = position_text(
-                max(tab.index, 0), len(tab.order), labelled, len(self._edge_ids), tab.queue
-            ) + (f"  \n{code(edge_id)}" if edge_id else "")
+            total = len(self._edge_ids)
+            where = position_text(max(tab.index, 0), len(tab.order), labelled, total, tab.queue)
+            mark = f"  \n{code(edge_id)}" if edge_id else ""
+            panel.position.content = where + run_header(self._snapshot(labels)) + mark
         self._prefetch(tab)
 
     def _show_edge(self, tab: Tab, edge_id: str, votes: dict[str, str], draw_scene: bool) -> None:
@@ -381,6 +385,7 @@ class Studio:
             use_guess,
             notes,
             self._scoring,
+            decision_rows(edge),
         )
         if tab.failed is not None:
             facts = (

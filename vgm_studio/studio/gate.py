@@ -39,6 +39,8 @@ import websockets.asyncio.server as ws_server
 from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
+from vgm_studio.studio.links import LINK_JS
+
 LOOPBACK_HOSTS = frozenset({"127.0.0.1", "localhost", "::1"})
 
 # viser moves the camera while W/A/S/D/Q/E are held (its keyboard navigation listens on
@@ -86,6 +88,14 @@ class Gate:
     def page_path(self) -> str:
         return f"/{self.token}" if self.token else "/"
 
+    def url(self, port: int) -> str:
+        """The page's address as a browser on this machine (or, off loopback, on another
+        one) reaches it."""
+        host = "localhost" if self.listen_host in ("127.0.0.1", "0.0.0.0") else self.listen_host
+        if ":" in host:
+            host = f"[{host}]"
+        return f"http://{host}:{port}{self.page_path}"
+
     def _path_ok(self, path: str) -> bool:
         path = path.partition("?")[0]
         return path.rstrip("/") == self.page_path.rstrip("/")
@@ -115,8 +125,11 @@ def _page() -> tuple[bytes, bytes]:
     """viser's client page with the key guard added: (plain, gzipped)."""
     html = (Path(viser.__file__).parent / "client" / "build" / "index.html").read_text()
     head_end = html.index("</head>")
-    page = (html[:head_end] + _KEY_GUARD_JS + html[head_end:]).encode()
-    return page, gzip.compress(page)
+    page = html[:head_end] + _KEY_GUARD_JS + html[head_end:]
+    # First in <head>: the worker viser's script makes must already be the linking one.
+    head = page.index("<head>") + len("<head>")
+    page = page[:head] + LINK_JS + page[head:]
+    return page.encode(), gzip.compress(page.encode())
 
 
 def _page_response(request: Request) -> Response:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import html
 import math
 import re
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -87,8 +87,11 @@ def build_panel(
     annotator: str,
     queue: Queue,
     actions: dict[str, Callable[[], None]],
+    queues: Sequence[Queue] = tuple(Queue),
 ) -> Panel:
     """Adds the panel to ``client``'s GUI and wires buttons and hotkeys to ``actions``.
+
+    ``queues`` are those the dropdown offers (a run's queues only where edges carry a run).
 
     What an annotator presses and the trainer's state come first, so that at 1400×850 the
     buttons and *Train now* are in view without scrolling; pictures and settings follow.
@@ -118,7 +121,7 @@ def build_panel(
     vgm = gui.add_image(_BLANK, format="png")
     layers = gui.add_markdown("")
     with gui.add_folder("Queue and annotator"):
-        queue_dd = gui.add_dropdown("Queue", [q.value for q in Queue], initial_value=queue.value)
+        queue_dd = gui.add_dropdown("Queue", [q.value for q in queues], initial_value=queue.value)
         annotator_text = gui.add_text("Annotator", annotator)
         note = gui.add_text("Note", "", hint="Saved with the next label, then cleared.")
     return Panel(
@@ -242,11 +245,14 @@ def facts_text(
     use_guess: bool,
     notes: dict[str, str] | None = None,
     scoring: tuple[int, int] | None = None,
+    run: Sequence[tuple[str, str]] = (),
 ) -> str:
     """The edge's facts as a markdown table: matcher figures, model, reference, labels.
 
     Every value read from the edge or the labels goes through ``plain``/``code``. While a
     model scores the edges, ``scoring`` is (done, total): an edge not scored yet says so.
+    ``run`` are rows of a SLAM run's decisions (``decisions.decision_rows``, already safe),
+    shown before the labels.
     """
     m = edge.match
     rows = [
@@ -279,6 +285,7 @@ def facts_text(
                 f"({100 * exy:.1f} cm, {math.degrees(eth):.1f}° off)",
             )
         )
+    rows.extend(run)
     if votes:
         text = ", ".join(
             f"{plain(who, 60)}: {plain(label)}"

@@ -156,6 +156,10 @@ def serve(
     ready = None if started is None else time.perf_counter() - started
     when = f" (ready {ready:.1f} s after start)" if ready is not None else ""
     _say(f"VGM Studio: {store.count_edges()} edges at {studio.url}{when}")
+    link = studio.first_link()
+    if link is not None:
+        # ?edge= opens any edge by its id; &queue= names the queue it is shown in.
+        _say(f"  link to an edge: {link}")
     _say(KEYS)
     if not is_loopback(config.host):
         _warn("  warning: " + EXPOSED.format(host=config.host, port=config.port))
