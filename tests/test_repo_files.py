@@ -18,7 +18,20 @@ except ModuleNotFoundError:  # Python 3.10
 REPO = Path(__file__).resolve().parents[1]
 
 # Options whose value is a file or folder the command writes.
-WRITES = ("--out", "--map-png", "--record", "--json", "--png", "--workspace")
+WRITES = (
+    "--out",
+    "--map-png",
+    "--record",
+    "--json",
+    "--png",
+    "--workspace",
+    "--markdown",
+    "--g2o",
+    "--trajectory",
+    "--ros-map",
+    "--edges-out",
+    "--loops-out",
+)
 
 
 def _bash_blocks(text: str) -> str:
