@@ -183,36 +183,42 @@ def test_labelled_edges_read_with_context_take_each_side_from_its_local_map(offi
     assert grew > len(plain.edges) // 2
 
 
-def test_a_model_trained_with_context_keeps_it_and_reads_edges_with_it(office_edges, tmp_path):
+def test_a_model_trained_with_context_keeps_it_and_reads_edges_with_it(
+    balanced_office_edges, tmp_path
+):
     from vgm_studio.model.metrics import roc_auc
     from vgm_studio.model.training import read_labelled
     from vgm_studio.model.validator import Validator
 
     model = tmp_path / "context.pt"
     short = ("--epochs", "1", "--epoch-size", "64")
-    trained = run("train", office_edges, "--context", "2", "--no-covisible", *short, "--out", model)
+    trained = run(
+        "train", balanced_office_edges, "--context", "2", "--no-covisible", *short, "--out", model
+    )
     assert trained.returncode == 0, trained.stderr
     validator = Validator.load(model)
     assert validator.context == Context(neighbours=2)
-    wide = read_labelled([office_edges], progress=False, context=validator.context)
+    wide = read_labelled([balanced_office_edges], progress=False, context=validator.context)
     p = validator.predict(wide.edges)
     np.testing.assert_allclose(p, validator.predict_samples(wide.samples), atol=1e-6)
     report = tmp_path / "eval.json"
-    judged = run("eval", model, office_edges, "--json", report)
+    judged = run("eval", model, balanced_office_edges, "--json", report)
     assert judged.returncode == 0, judged.stderr
     assert json.loads(report.read_text())["auc"] == pytest.approx(roc_auc(wide.labels, p))
     # Its weights read other inputs than a single-scan run's: no warm start from them.
-    again = run("train", office_edges, "--init", model, *short, "--out", tmp_path / "b.pt")
+    again = run("train", balanced_office_edges, "--init", model, *short, "--out", tmp_path / "b.pt")
     # stderr also carries training's first progress line, so not one_line_error here.
     assert again.returncode == 1 and "--init needs a vgmnet one" in again.stderr
     assert "Traceback" not in again.stderr
-    bad = run("train", office_edges, "--context", "-1", "--out", tmp_path / "c.pt")
+    bad = run("train", balanced_office_edges, "--context", "-1", "--out", tmp_path / "c.pt")
     assert "--context" in one_line_error(bad, 2)
-    alone = run("train", office_edges, "--context", "0", "--covisible", "--out", tmp_path / "d.pt")
+    alone = run(
+        "train", balanced_office_edges, "--context", "0", "--covisible", "--out", tmp_path / "d.pt"
+    )
     assert "--covisible" in one_line_error(alone, 2) and "--context" in one_line_error(alone, 2)
 
 
-def test_train_unasked_draws_vgmnet_as_the_bundled_model_is(office_edges, tmp_path):
+def test_train_unasked_draws_vgmnet_as_the_bundled_model_is(balanced_office_edges, tmp_path):
     """``train`` without --context draws vgmnet's pairs as the bundled model's recipe does, so
     that a model trained with the defaults is one the background trainer can start from."""
     from vgm_studio.model.checkpoint import load_checkpoint
@@ -220,7 +226,9 @@ def test_train_unasked_draws_vgmnet_as_the_bundled_model_is(office_edges, tmp_pa
     from vgm_studio.model.registry import BUNDLED_MODEL
 
     model = tmp_path / "unasked.pt"
-    trained = run("train", office_edges, "--epochs", "1", "--epoch-size", "64", "--out", model)
+    trained = run(
+        "train", balanced_office_edges, "--epochs", "1", "--epoch-size", "64", "--out", model
+    )
     assert trained.returncode == 0, trained.stderr
     bundled = load_checkpoint(BUNDLED_MODEL).context
     assert load_checkpoint(model).context == DEFAULT_CONTEXT == bundled
