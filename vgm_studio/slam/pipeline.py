@@ -19,7 +19,12 @@ from vgm_studio.slam.config import SlamConfig
 from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.frontend import FrontEnd, fallback_edge, graph_edge
 from vgm_studio.slam.odometry import scan_odometry
-from vgm_studio.slam.validation import EdgeValidator, LocalMaps, pair_judge
+from vgm_studio.slam.validation import (
+    EdgeValidator,
+    LocalMaps,
+    check_loop_precision,
+    pair_judge,
+)
 
 MIN_POINTS = 10
 
@@ -153,6 +158,7 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
             f"has {int(usable.sum())} scan(s) with at least {MIN_POINTS} points; "
             "SLAM needs two or more",
         )
+    check_loop_precision(config.validation)
     t = time.perf_counter()
     odometry = scan_odometry(log.scans, progress=progress, judge=pair_judge(config.validation))
     seconds["odometry"] = time.perf_counter() - t

@@ -163,6 +163,20 @@ class EdgeValidator:
         return max([self.model.threshold, *(c for c in cuts if c is not None)])
 
 
+def check_loop_precision(config: ValidationConfig) -> None:
+    """Refuses ``--loop-precision`` with a checkpoint that cannot serve it, before any work:
+    the cut comes from the checkpoint's validation curve (``Validator.threshold_at_precision``).
+
+    Raises:
+        InputError: No model validator, or a checkpoint without a curve.
+    """
+    if config.loop_precision is None:
+        return
+    if config.validator not in VALIDATOR_MODELS:
+        raise InputError(None, "--loop-precision needs a model validator")
+    _load(config.model, config.validator).threshold_at_precision(config.loop_precision)
+
+
 def pair_judge(config: ValidationConfig) -> Judge | None:
     """The model validator as a judge of matches of one scan against the one before it (the
     wheel-less odometry's candidates, ``slam/odometry.py``); None without a model.
