@@ -44,7 +44,7 @@ COLOURS = {
     "rejected": (230, 40, 40),
     "inconsistent": (255, 150, 0),
     "injected": (220, 40, 220),
-    "graph": (40, 120, 255),
+    "graph": (70, 70, 230),
 }
 
 

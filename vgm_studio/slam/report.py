@@ -52,7 +52,7 @@ LOOP_COLOURS: dict[str, tuple[int, int, int]] = {
     "kept (window)": (40, 120, 255),
     "kept (place)": (20, 170, 60),
     "kept (sweep)": (150, 90, 255),
-    "kept (graph)": (40, 120, 255),
+    "kept (graph)": (70, 70, 230),
 }
 
 
