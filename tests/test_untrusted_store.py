@@ -104,7 +104,7 @@ def test_eval_json_into_a_folder_that_cannot_be_written(office_edges, tmp_path, 
     model = REPO / "assets" / "models" / "vgmnet-default.pt"
     proc = run("eval", model, office_edges, "--json", folder / "m.json")
     assert one_line_error(proc, 1).endswith(
-        f"{folder / 'm.json'}: cannot write (Operation not permitted)"
+        f"{folder / 'm.json'}: cannot write here (Operation not permitted)"
     )
 
 

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from vgm_studio.model.registry import MODEL_NAMES, HyperFlags, entry
-from vgm_studio.tools.options import Device, DeviceOpt, one_of
+from vgm_studio.tools.options import Device, DeviceOpt, one_of, writable_file
 
 EdgesArg = Annotated[
     list[Path], typer.Argument(metavar="EDGES.jsonl...", help="Labelled edge files.")
@@ -181,4 +181,6 @@ def evaluate(
     """Evaluate a model on labelled edges: accuracy, precision, recall, F1, AUC, TP/FP/TN/FN."""
     from vgm_studio.services.models import evaluate_model
 
+    if json_out is not None:
+        writable_file(json_out)  # before the edges' scans are read: the refusal comes alone
     typer.echo(evaluate_model(model, edges, json_out, device.value, batch_size))
