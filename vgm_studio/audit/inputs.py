@@ -38,6 +38,11 @@ class AuditInput:
     vertex_scans: NDArray[np.int64]
     scan_poses: NDArray[np.float64]
 
+    @property
+    def inline(self) -> bool:
+        """The graph's own scans are the log: vertex k is scan k."""
+        return bool(np.array_equal(self.vertex_scans, np.arange(len(self.log))))
+
 
 def inline_input(graph: PoseGraphFile) -> AuditInput:
     """The graph's own scans, one per vertex.

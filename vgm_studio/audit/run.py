@@ -121,10 +121,12 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
             own.append((e.a, e.b, e.measurement, e.covariance))
             lines.append(0)
     seconds["injecting"] = time.perf_counter() - t
-    # A graph tied to a log's scans: the validator's helper places the vertices' neighbours in
-    # the log while the pairs are matched (the matches of a graph's own scans place them).
-    inline = np.array_equal(inp.vertex_scans, np.arange(len(inp.log)))
-    early = None if inline else make_validator(inp, config, scans, None, usable_threads() > 1)
+    # The model loads before the pairs are matched; where the graph is tied to a log's scans,
+    # its helper places the vertices' neighbours in the log meanwhile (the matches of a graph's
+    # own scans place them: ``chain_placements``).
+    t = time.perf_counter()
+    validator = make_validator(inp, config, scans, not inp.inline and usable_threads() > 1)
+    seconds["loading"] = time.perf_counter() - t
     try:
         t = time.perf_counter()
         pairs = [(a, b, z) for a, b, z, _ in own]
@@ -143,11 +145,11 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
             for (a, b, z, _), m, line in zip(own, matches, lines, strict=True)
         ]
         t = time.perf_counter()
-        validator = early or make_validator(inp, config, scans, chain_placements(inp, edges, again))
+        if inp.inline:
+            validator.adopt(chain_placements(inp, edges, again))
         judgement = judge_edges(validator, config, scans, edges, progress)
     finally:
-        if early is not None:
-            early.close()
+        validator.close()
     seconds["validator"] = time.perf_counter() - t
     t = time.perf_counter()
     covariances = [cov for _, _, _, cov in own]

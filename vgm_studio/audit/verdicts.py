@@ -75,7 +75,6 @@ def judge_edges(
             bar.update(len(chunk))
     finally:
         bar.close()
-        validator.close()
     threshold = validator.threshold
     cut = config.flag_below if config.flag_below is not None else threshold
     loop_bar = validator.loop_bar
@@ -95,18 +94,15 @@ def judge_edges(
 
 
 def make_validator(
-    inp: AuditInput,
-    config: AuditConfig,
-    scans: Sequence[Scan],
-    placed: Placements | None,
-    ahead: bool = False,
+    inp: AuditInput, config: AuditConfig, scans: Sequence[Scan], ahead: bool
 ) -> EdgeValidator:
-    """The validator, its local maps drawn from the log; ``placed`` where the graph's own scans
-    are the log, and then from ``scans``, the vertices' scans that keep their points (a map
-    asks for a vertex's points once per edge it is in: 65,000 times on Killian Court)."""
+    """The validator, its local maps drawn from the log: from ``scans``, the vertices' scans
+    that keep their points, where the graph's own scans are the log (a map asks for a
+    vertex's points once per edge it is in: 65,000 times on Killian Court); ``ahead`` places
+    the neighbours in a helper process meanwhile (``slam.placing``)."""
     reference = dense_reference(inp.log, inp.scan_poses)
-    log_scans = scans if placed is not None else inp.log.scans
-    local = LocalMaps(log_scans, inp.scan_poses, inp.vertex_scans, ahead, placed)
+    log_scans = scans if inp.inline else inp.log.scans
+    local = LocalMaps(log_scans, inp.scan_poses, inp.vertex_scans, ahead)
     return EdgeValidator(
         config.validation,
         scans,

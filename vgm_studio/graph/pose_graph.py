@@ -110,10 +110,14 @@ def _values(poses: NDArray[np.float64]) -> gtsam.Values:
 
 
 def _poses(values: gtsam.Values, count: int) -> NDArray[np.float64]:
-    out = np.empty((count, 3))
-    for i in range(count):
-        p = values.atPose2(i)
-        out[i] = (p.x(), p.y(), p.theta())
+    """The (count, 3) poses of keys 0..count-1, which are all the values hold.
+
+    gtsam's own extraction, in key order: a Python loop over ``atPose2`` took 10 ms for 4,000
+    poses, once per update of the running estimate.
+    """
+    out = np.asarray(gtsam.utilities.extractPose2(values), dtype=np.float64)
+    if out.shape != (count, 3):
+        raise ValueError(f"expected the poses of keys 0..{count - 1}, got {out.shape[0]}")
     return out
 
 

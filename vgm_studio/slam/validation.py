@@ -45,15 +45,12 @@ class LocalMaps:
         keyframes: Each keyframe's index in the log.
         ahead: Place the keyframes' neighbours in a helper process ahead of need
             (``slam/placing.py``): the same maps, sooner where a core is free.
-        placed: Neighbours' poses matched already, (centre, neighbour) → pose in the
-            centre's frame (None: the match did not hold); the rest are matched on demand.
     """
 
     scans: Sequence[Scan]
     poses: NDArray[np.float64]
     keyframes: NDArray[np.int64]
     ahead: bool = False
-    placed: Placements | None = None
 
 
 class EdgeValidator:
@@ -97,8 +94,6 @@ class EdgeValidator:
                 self.model.require_single_scans("this run")
             else:
                 mapper = LocalMapper(local.scans, local.poses, self.model.context)
-                if local.placed is not None:
-                    mapper.adopt(local.placed)
                 self._maps = (mapper, local.keyframes)
                 if local.ahead:
                     self._ahead = PlacingAhead(mapper, local.keyframes)
@@ -143,6 +138,12 @@ class EdgeValidator:
         if self._ahead is not None:
             self._ahead.collect()
         return mapper.sides(int(keyframes[edge.a]), int(keyframes[edge.b]), edge.estimate)
+
+    def adopt(self, placed: Placements) -> None:
+        """Neighbours' poses matched already, (centre, neighbour) → pose in the centre's frame
+        (None: the match did not hold); the local maps match the rest on demand."""
+        if self._maps is not None:
+            self._maps[0].adopt(placed)
 
     def close(self) -> None:
         """Stops the helper that places neighbours ahead, if any."""
