@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 from vgm_studio.datasets.carmen import read_carmen
@@ -18,7 +19,8 @@ def open_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
     """Reads a CARMEN log (a file), a ROS bag (a ``.bag`` file or a ROS 2 bag folder) or the
     scans of a g2o pose graph (``ROBOTLASER1`` after each vertex; ``datasets.g2o``).
 
-    The laser's mount in ``options`` places the scans in the base frame. A CARMEN log's pose
+    The laser's mount in ``options`` places the scans in the base frame; without one, the mount
+    a CARMEN log declares in its PARAM lines does (``datasets.carmen_mount``). A CARMEN log's pose
     fields are the laser's pose (ROBOTLASER1 says so; CARMEN writes FLASER's the same way), so
     they move to the base with the mount and the world stays where the log put it.
     """
@@ -33,7 +35,14 @@ def open_log(path: str | Path, options: ReadOptions | None = None) -> ScanLog:
     if looks_like_graph(path):
         return graph_log(read_graph(path))
     log = read_carmen(path, options)
-    if options is None:
+    given = (
+        None if options is None else mount_from_options(options.laser_pose, options.laser_flipped)
+    )
+    if given is not None:
+        return with_mount(log, given, "given by --laser-pose/--laser-flipped", poses_of_laser=True)
+    if log.declared_mount is None:
         return log
-    mount = mount_from_options(options.laser_pose, options.laser_flipped)
-    return with_mount(log, mount, "given by --laser-pose/--laser-flipped", poses_of_laser=True)
+    declared, said = log.declared_mount
+    if declared.is_base:
+        return replace(log, mount_source=said)
+    return with_mount(log, declared, said, poses_of_laser=True)

@@ -33,6 +33,7 @@ from vgm_studio.datasets.carmen_lines import (
     parse_flaser,
     parse_robotlaser,
 )
+from vgm_studio.datasets.carmen_mount import MOUNT_PARAMS, DeclaredMount
 from vgm_studio.datasets.options import ReadOptions
 from vgm_studio.datasets.scans import PoseSource, Scan, ScanLog
 from vgm_studio.errors import InputError
@@ -137,6 +138,7 @@ def read_carmen(path: str | Path, options: ReadOptions | None = None) -> ScanLog
     last_odom: NDArray[np.float64] | None = None
     fresh = False
     bad: list[int] = []
+    declared = DeclaredMount()
     try:
         lines: Iterable[str] = path.open("r", encoding="utf-8", errors="strict").readlines()
     except UnicodeDecodeError as exc:
@@ -147,6 +149,14 @@ def read_carmen(path: str | Path, options: ReadOptions | None = None) -> ScanLog
             continue
         kind = tokens[0]
         counts[kind] += 1
+        if kind == "PARAM" and not raw and len(tokens) > 1 and tokens[1] in MOUNT_PARAMS:
+            try:
+                declared.take(LineParser(path, lineno, tokens))
+            except InputError:
+                if not options.skip_bad_lines:
+                    raise
+                bad.append(lineno)
+            continue
         if kind in SKIPPED:
             continue
         p = LineParser(path, lineno, tokens)
@@ -240,6 +250,7 @@ def read_carmen(path: str | Path, options: ReadOptions | None = None) -> ScanLog
         skipped_line_numbers=bad,
         ignored_messages=dict(ignored),
         message_counts=dict(counts),
+        declared_mount=declared.mount(options.laser),
     )
 
 

@@ -99,6 +99,8 @@ class ScanLog:
         mount_source: Where the mount came from (``/tf_static``, ``--laser-pose`` …).
         warnings: What the reader chose that a person should hear about (one line each),
             such as which of a bag's LaserScan topics it read.
+        declared_mount: The mount a CARMEN log declares in its PARAM lines and where (not yet
+            applied: ``open_log`` applies it unless ``--laser-pose`` gives another).
     """
 
     path: Path
@@ -113,6 +115,7 @@ class ScanLog:
     message_counts: dict[str, int] = field(default_factory=dict)
     mount: LaserMount | None = None
     mount_source: str | None = None
+    declared_mount: tuple[LaserMount, str] | None = None
     warnings: list[str] = field(default_factory=list)
 
     def __len__(self) -> int:
