@@ -97,12 +97,12 @@ def by_times(
     stamps = log.timestamps
     order = np.argsort(stamps, kind="stable")
     sorted_stamps = stamps[order]
-    pos = np.clip(np.searchsorted(sorted_stamps, times.timestamps), 1, len(stamps) - 1)
-    lo, hi = sorted_stamps[pos - 1], sorted_stamps[np.minimum(pos, len(stamps) - 1)]
-    pick = np.where(np.abs(times.timestamps - lo) <= np.abs(hi - times.timestamps), pos - 1, pos)
-    if len(stamps) == 1:
-        pick = np.zeros(len(times.timestamps), dtype=np.int64)
-    scans = order[pick]
+    after = np.clip(np.searchsorted(sorted_stamps, times.timestamps), 0, len(stamps) - 1)
+    before = np.maximum(after - 1, 0)
+    nearer = np.abs(times.timestamps - sorted_stamps[before]) <= np.abs(
+        sorted_stamps[after] - times.timestamps
+    )
+    scans = order[np.where(nearer, before, after)]
     gap = np.abs(stamps[scans] - times.timestamps)
     far = np.flatnonzero(~(gap <= tolerance))
     if len(far):
