@@ -29,7 +29,7 @@ from vgm_studio.audit.verdicts import (
 )
 from vgm_studio.core import se2
 from vgm_studio.core.cpus import usable_threads
-from vgm_studio.datasets.g2o import G2oEdge, information_of
+from vgm_studio.datasets.g2o import G2oEdge
 from vgm_studio.graph.pose_graph import GraphEdge, optimize
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.slam.edges import SlamEdge
@@ -116,8 +116,7 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
     matcher = ScanMatcher()
     if config.inject.count:
         estimate = optimize(graph.poses, _factors(own, len(graph)), config.graph, anchor=anchor)
-        drawn = [(e.a, e.b, e.measurement, e.covariance) for e in graph.edges]
-        for e in false_loops(estimate.poses, _edges(drawn), scans, config.inject, matcher):
+        for e in false_loops(estimate.poses, graph.edges, scans, config.inject, matcher):
             own.append((e.a, e.b, e.measurement, e.covariance))
             lines.append(0)
     seconds["injecting"] = time.perf_counter() - t
@@ -188,12 +187,6 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
         given=graph.poses,
     )
     return AuditResult(inp, run, verdicts, seconds)
-
-
-def _edges(
-    own: list[tuple[int, int, NDArray[np.float64], NDArray[np.float64]]],
-) -> list[G2oEdge]:
-    return [G2oEdge(a, b, z, information_of(cov)) for a, b, z, cov in own]
 
 
 def _factors(
