@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterator, Sequence
 from contextlib import suppress
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,6 +48,11 @@ from rosbags.typesys import Stores, get_typestore
 from vgm_studio.core.hashing import content_hash
 from vgm_studio.core.se2 import wrap_angle
 from vgm_studio.datasets.bag_errors import BAG_ERRORS, bag_error, one_line
+from vgm_studio.datasets.bag_topics import (
+    ODOMETRY,
+    SCANS,
+    choose_topic,
+)
 from vgm_studio.datasets.mount import LaserMount, mount_from_options
 from vgm_studio.datasets.options import ReadOptions
 from vgm_studio.datasets.scans import Scan, ScanLog
@@ -56,14 +61,10 @@ from vgm_studio.errors import InputError
 from vgm_studio.progress import counter
 
 if TYPE_CHECKING:
-    from rosbags.interfaces import Connection, TopicInfo
+    from rosbags.interfaces import Connection
 
-LASER_SCAN_TYPES = frozenset({"sensor_msgs/msg/LaserScan", "sensor_msgs/LaserScan"})
-ODOMETRY_TYPES = frozenset({"nav_msgs/msg/Odometry", "nav_msgs/Odometry"})
 ROS2_STORAGE_SUFFIXES = frozenset({".db3", ".mcap"})
 
-# The LaserScan topic taken, with a warning, when a bag has several and none is asked for.
-DEFAULT_SCAN_TOPIC = "/scan"
 
 # Seconds a scan may lie before the first or after the last Odometry message and still take it.
 MAX_ODOMETRY_EXTRAPOLATION = 0.5
@@ -104,78 +105,6 @@ class _RawScan:
     angle_min: float
     angle_increment: float
     range_max: float
-
-
-def _describe_topics(topics: Mapping[str, TopicInfo]) -> str:
-    if not topics:
-        return "the bag has no topics"
-    listed = ", ".join(f"{name} ({info.msgtype}, {info.msgcount})" for name, info in topics.items())
-    return f"topics found: {listed}"
-
-
-@dataclass(frozen=True)
-class _Kind:
-    """A message type a bag is read for, and how its topic is chosen.
-
-    Attributes:
-        types: Its type names (ROS 1 and ROS 2 spellings).
-        what: Its name in messages.
-        option: The option that chooses its topic.
-        required: A bag without it is refused.
-        default: The topic taken, with a warning, when the bag has several and none is asked
-            for (None: refuse, naming them).
-    """
-
-    types: frozenset[str]
-    what: str
-    option: str
-    required: bool
-    default: str | None = None
-
-
-SCANS = _Kind(LASER_SCAN_TYPES, "sensor_msgs/LaserScan", "--scan-topic", True, DEFAULT_SCAN_TOPIC)
-# No usual name to fall back on: /odom and /odometry/filtered are both common, and reading
-# the wrong one misplaces every scan.
-ODOMETRY = _Kind(ODOMETRY_TYPES, "nav_msgs/Odometry", "--odom-topic", False)
-
-
-def _choose_topic(
-    path: Path,
-    topics: Mapping[str, TopicInfo],
-    kind: _Kind,
-    wanted: str | None,
-    warnings: list[str],
-) -> str | None:
-    """The topic to read for one message type: the one asked for, else the only one, else
-    the kind's default when it is one of several (said in ``warnings``)."""
-    what, option = kind.what, kind.option
-    candidates = sorted(name for name, info in topics.items() if info.msgtype in kind.types)
-    if wanted is not None:
-        if wanted in candidates:
-            return wanted
-        if wanted in topics:
-            problem = f"{option} {wanted} carries {topics[wanted].msgtype}, not {what}"
-        else:
-            problem = f"{option} {wanted} is not in this bag"
-        raise InputError(path, f"{problem}; {_describe_topics(topics)}")
-    if len(candidates) == 1:
-        return candidates[0]
-    if len(candidates) > 1 and kind.default in candidates:
-        others = ", ".join(c for c in candidates if c != kind.default)
-        warnings.append(
-            f"{path}: {len(candidates)} {what} topics; reading {kind.default} (not {others}); "
-            f"choose another with {option}"
-        )
-        return kind.default
-    if len(candidates) > 1:
-        raise InputError(
-            path,
-            f"{len(candidates)} {what} topics ({', '.join(candidates)}); choose one with "
-            f"{option} TOPIC",
-        )
-    if kind.required:
-        raise InputError(path, f"no {what} topic in this bag; {_describe_topics(topics)}")
-    return None
 
 
 def _stamp_ns(msg: Any, receive_ns: int) -> int:
@@ -285,9 +214,9 @@ def _read_messages(
         topics = reader.topics
     except BAG_ERRORS as err:
         raise bag_error(path, err) from None
-    scan_topic = _choose_topic(path, topics, SCANS, options.scan_topic, warnings)
+    scan_topic = choose_topic(path, topics, SCANS, options.scan_topic, warnings)
     assert scan_topic is not None  # required
-    odom_topic = _choose_topic(path, topics, ODOMETRY, options.odom_topic, warnings)
+    odom_topic = choose_topic(path, topics, ODOMETRY, options.odom_topic, warnings)
     read = {t for t in (scan_topic, odom_topic) if t is not None}
     if mount_from_options(options.laser_pose, options.laser_flipped) is None:
         read |= {name for name, info in topics.items() if info.msgtype in TF_TYPES}
