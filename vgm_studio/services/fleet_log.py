@@ -27,6 +27,7 @@ from vgm_studio.matching.reference_labels import LabelThresholds
 from vgm_studio.model.cache import shared_validator
 from vgm_studio.model.metrics import binary_metrics
 from vgm_studio.services.candidates import make_edge_file
+from vgm_studio.services.outputs import RunFiles
 from vgm_studio.services.slam import SlamOutputs, run_slam_command
 from vgm_studio.slam.config import SlamConfig
 from vgm_studio.slam.edges import LOOP_SOURCES
@@ -148,7 +149,7 @@ def process_log(
         reference=entry.reference,
         relations=entry.relations,
         join=settings.join,
-        outputs=SlamOutputs(json=slam_json, maps=maps),
+        outputs=SlamOutputs(json=slam_json, files=RunFiles(maps=maps)),
     )
     row.update(slam_columns(json.loads(slam_json.read_text(encoding="utf-8"))))
     row.update(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import time
 from collections import Counter
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from vgm_studio.datasets import ReadOptions
@@ -35,26 +35,15 @@ class SlamOutputs:
 
     Attributes:
         json: The run's figures as JSON.
-        maps: A folder for the odometry, before and after maps (and all three) as PNG.
-        record: A rerun recording.
-        spawn: Open the rerun viewer on the run.
         loops: An edges file of the loops the run matched (``slam.loop_edges``).
-        trajectory: Every scan's pose of the after graph as a TUM file (``datasets.tum``).
-        ros_map: A folder for the after map as ROS map_server loads it (``maps.ros_map``).
-        g2o: The after graph as a g2o 2D file, each keyframe with its scan
-            (``datasets.g2o``).
         loops_injected: ``loops`` holds the injected false loops too.
+        files: Maps, recording, trajectory, ROS map and g2o graph (``services.outputs``).
     """
 
     json: Path | None = None
-    maps: Path | None = None
-    record: Path | None = None
-    spawn: bool = False
     loops: Path | None = None
-    trajectory: Path | None = None
-    ros_map: Path | None = None
-    g2o: Path | None = None
     loops_injected: bool = False
+    files: RunFiles = field(default_factory=RunFiles)
 
 
 def validator_model(validator: str, model: Path | None) -> Path | None:
@@ -118,15 +107,7 @@ def run_slam_command(
     errors = errors_of(result, source.relations) if source.relations is not None else None
     if errors is not None:
         say(table(errors))
-    files = RunFiles(
-        outputs.maps,
-        outputs.record,
-        outputs.spawn,
-        outputs.trajectory,
-        outputs.ros_map,
-        outputs.g2o,
-    )
-    write_run_files(source.log, result, errors, config.maps, files, voice)
+    write_run_files(source.log, result, errors, config.maps, outputs.files, voice)
     if outputs.loops is not None:
         _write_loops(outputs.loops, source, result, say, outputs.loops_injected)
     seconds = time.perf_counter() - start

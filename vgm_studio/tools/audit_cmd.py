@@ -27,6 +27,7 @@ from vgm_studio.tools.run_options import (
     TimeOffsetOpt,
     TrajectoryOpt,
     check_writable,
+    run_files,
     validator_option,
 )
 
@@ -117,13 +118,11 @@ def audit(
     from vgm_studio.maps.config import MapConfig
     from vgm_studio.services import Voice
     from vgm_studio.services.audit import AuditOutputs, AuditSources, run_audit_command
-    from vgm_studio.services.outputs import RunFiles
     from vgm_studio.services.slam import validator_model
     from vgm_studio.slam.config import ValidationConfig
 
-    files = {"json": json_out, "md": markdown, "edges": edges_out, "g2o": g2o}
-    files |= {"trajectory": trajectory, "record": record}
-    check_writable(files, {"--map-png": map_png, "--ros-map": ros_map})
+    check_writable([json_out, markdown, edges_out])
+    files = run_files(map_png, record, spawn, trajectory, ros_map, g2o)
     config = AuditConfig(
         validation=ValidationConfig(
             validator=validator,
@@ -146,11 +145,6 @@ def audit(
             JoinOptions(time_tolerance, time_offset),
         ),
         config,
-        AuditOutputs(
-            json_out,
-            markdown,
-            edges_out,
-            RunFiles(map_png, record, spawn, trajectory, ros_map, g2o),
-        ),
+        AuditOutputs(json_out, markdown, edges_out, files),
         Voice(typer.echo, lambda line: typer.echo(line, err=True)),
     )

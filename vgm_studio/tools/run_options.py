@@ -3,13 +3,17 @@ writes. Declared once, so each means the same in both commands."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from vgm_studio.slam.config import VALIDATORS
 from vgm_studio.tools.options import number, one_of, positive, writable_file, writable_folder
+
+if TYPE_CHECKING:
+    from vgm_studio.services.outputs import RunFiles
 
 ModelOpt = Annotated[
     Path | None,
@@ -104,11 +108,29 @@ def validator_option(what: str) -> object:
     return one_of(VALIDATORS, what)
 
 
-def check_writable(files: dict[str, Path | None], folders: dict[str, Path | None]) -> None:
+def run_files(
+    maps: Path | None,
+    record: Path | None,
+    spawn: bool,
+    trajectory: Path | None,
+    ros_map: Path | None,
+    g2o: Path | None,
+) -> RunFiles:
+    """The files a run writes (``--map-png``, ``--record``, ``--spawn``, ``--trajectory``,
+    ``--ros-map``, ``--g2o``), each checked writable now."""
+    from vgm_studio.services.outputs import RunFiles  # loads the stages: not for --help
+
+    check_writable([record, trajectory, g2o], {"--map-png": maps, "--ros-map": ros_map})
+    return RunFiles(maps, record, spawn, trajectory, ros_map, g2o)
+
+
+def check_writable(
+    files: Sequence[Path | None], folders: dict[str, Path | None] | None = None
+) -> None:
     """Fails now, before minutes of work, where an output cannot be written."""
-    for path in files.values():
+    for path in files:
         if path is not None:
             writable_file(path)
-    for flag, folder in folders.items():
+    for flag, folder in (folders or {}).items():
         if folder is not None:
             writable_folder(folder, flag)

@@ -35,6 +35,7 @@ from vgm_studio.tools.run_options import (
     TimeOffsetOpt,
     TrajectoryOpt,
     check_writable,
+    run_files,
 )
 
 
@@ -158,9 +159,8 @@ def slam(
         ValidationConfig,
     )
 
-    files = {"json": json_out, "record": record, "loops": loops_out, "g2o": g2o}
-    files["trajectory"] = trajectory
-    check_writable(files, {"--map-png": map_png, "--ros-map": ros_map})
+    check_writable([json_out, loops_out])
+    files = run_files(map_png, record, spawn, trajectory, ros_map, g2o)
     config = SlamConfig(
         front_end=FrontEndConfig(
             keyframe_distance=keyframe_distance,
@@ -190,16 +190,6 @@ def slam(
         reference=reference,
         relations=relations,
         join=JoinOptions(time_tolerance, time_offset),
-        outputs=SlamOutputs(
-            json_out,
-            map_png,
-            record,
-            spawn,
-            loops_out,
-            trajectory=trajectory,
-            ros_map=ros_map,
-            g2o=g2o,
-            loops_injected=loops_injected,
-        ),
+        outputs=SlamOutputs(json_out, loops_out, loops_injected, files),
         voice=Voice(typer.echo, lambda line: typer.echo(line, err=True)),
     )
