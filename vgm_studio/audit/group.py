@@ -52,17 +52,25 @@ def chain(
 ) -> list[GraphEdge]:
     """The sequential chain as the group check reads it (see the module's docstring)."""
     out: list[GraphEdge] = []
-    joined = set()
     for e, cov in zip(edges, covariances, strict=True):
         if e.kind != "sequential":
             continue
         width = floored(cov, config) if e.validated else widened(e, config)
         out.append(GraphEdge(e.a, e.b, e.guess, width, known_inlier=True))
-        joined.add(e.b)
-    for k in range(1, len(poses)):
-        if k not in joined:
-            out.append(GraphEdge(k - 1, k, se2.between(poses[k - 1], poses[k]), _UNTIED, True))
-    return out
+    return with_ties(out, poses)
+
+
+def with_ties(factors: list[GraphEdge], poses: NDArray[np.float64]) -> list[GraphEdge]:
+    """``factors`` and, between consecutive vertices that no sequential factor joins, a tie
+    at the graph's own estimate, too wide to say anything of where the vertex is: the chain
+    stays one graph (and one that solves where flagged loops held two parts together)."""
+    joined = {f.b for f in factors if f.b == f.a + 1}
+    ties = [
+        GraphEdge(k - 1, k, se2.between(poses[k - 1], poses[k]), _UNTIED, known_inlier=True)
+        for k in range(1, len(poses))
+        if k not in joined
+    ]
+    return factors + ties
 
 
 def dead_reckoning(links: Sequence[GraphEdge], count: int) -> NDArray[np.float64]:

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vgm_studio.audit.config import AuditConfig
-from vgm_studio.audit.group import check_loops, widened
+from vgm_studio.audit.group import check_loops, widened, with_ties
 from vgm_studio.audit.inject import false_loops
 from vgm_studio.audit.inputs import AuditInput
 from vgm_studio.audit.judge import Rematch, judge_pairs
@@ -35,10 +35,6 @@ from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.pipeline import SlamResult
 
-# Ties consecutive vertices that no edge of a graph joins, so a graph whose flagged loops
-# held two parts together still solves; too wide to move anything.
-_UNTIED = np.diag([1e3**2, 1e3**2, 1e2**2])
-
 
 @dataclass
 class Verdict:
@@ -46,14 +42,12 @@ class Verdict:
 
     Attributes:
         edge: The edge with the validator's and the group check's decisions.
-        covariance: (3, 3) its covariance as the graph gave it.
         line: The line of the graph file it came from (0: injected).
         reason: Why it was kept or flagged, for a person.
         rematch: The matcher's answer from the measurement, where it was asked for.
     """
 
     edge: SlamEdge
-    covariance: NDArray[np.float64]
     line: int
     reason: str
     rematch: Rematch | None = None
@@ -115,7 +109,7 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
     scans = [dataclasses.replace(inp.log.scans[i], keep_points=True) for i in inp.vertex_scans]
     matcher = ScanMatcher()
     if config.inject.count:
-        estimate = optimize(graph.poses, _factors(own, len(graph)), config.graph, anchor=anchor)
+        estimate = optimize(graph.poses, _factors(own, graph.poses), config.graph, anchor=anchor)
         for e in false_loops(estimate.poses, graph.edges, scans, config.inject, matcher):
             own.append((e.a, e.b, e.measurement, e.covariance))
             lines.append(0)
@@ -164,15 +158,15 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
     )
     seconds["consistency"] = time.perf_counter() - t
     t = time.perf_counter()
-    before = optimize(graph.poses, _factors(own, len(graph)), config.graph, anchor=anchor)
+    before = optimize(graph.poses, _factors(own, graph.poses), config.graph, anchor=anchor)
     kept = [_kept_factor(e, cov, config) for e, cov in zip(edges, covariances, strict=True)]
-    cleaned = _with_ties([f for f in kept if f is not None], len(graph))
+    cleaned = with_ties([f for f in kept if f is not None], graph.poses)
     after = optimize(graph.poses, cleaned, config.graph, anchor=anchor)
     seconds["back_end"] = time.perf_counter() - t
     reasons = Reasons(judgement, rescued, scans)
     verdicts = [
-        Verdict(e, cov, line, reasons(k, e), r)
-        for k, (e, cov, line, r) in enumerate(zip(edges, covariances, lines, again, strict=True))
+        Verdict(e, line, reasons(k, e), r)
+        for k, (e, line, r) in enumerate(zip(edges, lines, again, strict=True))
     ]
     run = SlamResult(
         keyframes=inp.vertex_scans,
@@ -190,20 +184,11 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
 
 
 def _factors(
-    own: list[tuple[int, int, NDArray[np.float64], NDArray[np.float64]]], count: int
+    own: list[tuple[int, int, NDArray[np.float64], NDArray[np.float64]]],
+    poses: NDArray[np.float64],
 ) -> list[GraphEdge]:
     factors = [GraphEdge(a, b, z, cov, known_inlier=b == a + 1) for a, b, z, cov in own]
-    return _with_ties(factors, count)
-
-
-def _with_ties(factors: list[GraphEdge], count: int) -> list[GraphEdge]:
-    joined = {f.b for f in factors if f.b == f.a + 1}
-    ties = [
-        GraphEdge(k - 1, k, np.zeros(3), _UNTIED, known_inlier=True)
-        for k in range(1, count)
-        if k not in joined
-    ]
-    return factors + ties
+    return with_ties(factors, poses)
 
 
 def _kept_factor(
