@@ -27,12 +27,11 @@ from vgm_studio.datasets.g2o import read_graph
 from vgm_studio.datasets.source import JoinOptions, LogSource, attach_reference
 from vgm_studio.datasets.tum import TumTrajectory, read_tum
 from vgm_studio.errors import InputError
-from vgm_studio.graph.metrics import RelationErrors, relation_errors
 from vgm_studio.matching.edges import write_edges
 from vgm_studio.services import Voice
 from vgm_studio.services.outputs import RunFiles, write_json, write_run_files
 from vgm_studio.slam.loop_edges import loop_edges
-from vgm_studio.slam.report import keyframe_trajectories, table
+from vgm_studio.slam.report import errors_of, table
 from vgm_studio.slam.scoring import relations_from_reference, with_own_reference
 
 
@@ -145,7 +144,7 @@ def run_audit_command(
     )
     result = run_audit(inp, config)
     voice.say(audit_line(result))
-    errors = _errors(result, source)
+    errors = errors_of(result.run, source.relations) if source.relations is not None else None
     if errors is not None:
         voice.say(table(errors))
     write_run_files(inp.log, result.run, errors, config.maps, outputs.files, voice)
@@ -162,16 +161,6 @@ def run_audit_command(
         voice.say(f"wrote {outputs.markdown}")
     voice.say(f"done in {seconds:.1f} s")
     return doc
-
-
-def _errors(result: AuditResult, source: LogSource) -> dict[str, RelationErrors] | None:
-    if source.relations is None:
-        return None
-    run = result.run
-    return {
-        name: relation_errors(run.scan_poses(poses), source.relations)
-        for name, poses in keyframe_trajectories(run).items()
-    }
 
 
 def _write_flagged(path: Path, result: AuditResult, source: LogSource, voice: Voice) -> None:
