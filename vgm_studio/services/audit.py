@@ -32,7 +32,7 @@ from vgm_studio.services import Voice
 from vgm_studio.services.outputs import RunFiles, write_json, write_run_files
 from vgm_studio.slam.loop_edges import loop_edges
 from vgm_studio.slam.report import errors_of, table
-from vgm_studio.slam.scoring import relations_from_reference, with_own_reference
+from vgm_studio.slam.scoring import score_by_reference
 
 
 @dataclass(frozen=True)
@@ -89,13 +89,13 @@ def read_audit_input(sources: AuditSources) -> tuple[AuditInput, LogSource]:
             raise InputError(None, "--vertex-times and --vertex-index tie vertices to --scans")
         inp = inline_input(graph)
     else:
-        log = open_log(sources.scans, sources.read)
         if sources.vertex_times is not None and sources.vertex_index:
             raise InputError(None, "give --vertex-times or --vertex-index, not both")
+        times = None if sources.vertex_times is None else read_tum(sources.vertex_times)
+        log = open_log(sources.scans, sources.read)
         if sources.vertex_index:
             inp = by_index(graph, log)
-        elif sources.vertex_times is not None:
-            times = read_tum(sources.vertex_times)
+        elif times is not None and sources.vertex_times is not None:
             tolerance = sources.join.time_tolerance
             inp = by_times(graph, log, times, sources.vertex_times, tolerance)
         elif graph.scans is not None and np.all(np.isfinite(graph.timestamps)):
@@ -111,9 +111,7 @@ def read_audit_input(sources: AuditSources) -> tuple[AuditInput, LogSource]:
     params: dict[str, Any] = {"read": asdict(sources.read), "reference_source": "log"}
     source = LogSource(inp.log, None, params)
     attach_reference(source, sources.read, sources.reference, sources.relations, sources.join)
-    source.log = with_own_reference(source.log)
-    if source.relations is None:
-        source.relations = relations_from_reference(source.log)
+    score_by_reference(source)
     inp.log = source.log
     return inp, source
 

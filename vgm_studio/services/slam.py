@@ -26,7 +26,7 @@ from vgm_studio.slam.report import (
     summary,
     table,
 )
-from vgm_studio.slam.scoring import relations_from_reference, with_own_reference
+from vgm_studio.slam.scoring import score_by_reference
 
 
 @dataclass(frozen=True)
@@ -95,11 +95,9 @@ def run_slam_command(
     source = read_slam_source(log, read, reference, relations, join)
     for line in source.warnings:
         voice.warn(line)
-    source.log = with_own_reference(source.log)
-    if source.relations is None:
-        source.relations = relations_from_reference(source.log)
-        if source.relations is not None:
-            say(f"scored against {len(source.relations)} relations drawn from the reference poses")
+    if score_by_reference(source):
+        assert source.relations is not None
+        say(f"scored against {len(source.relations)} relations drawn from the reference poses")
     result = run_slam(source.log, config)
     say(edge_line(result))
     for line in _what_is_missing(source.log, result):

@@ -11,6 +11,7 @@ import dataclasses
 
 from vgm_studio.datasets.relations import MatchedRelation
 from vgm_studio.datasets.scans import ScanLog
+from vgm_studio.datasets.source import LogSource
 from vgm_studio.graph.metrics import RelationSampling, reference_relations
 
 # GMapping writes one NEFF line per update; its FLASER pose fields are then its corrected poses.
@@ -35,3 +36,14 @@ def relations_from_reference(
     """Relations drawn from the log's reference poses; None when it has none."""
     relations = reference_relations([s.reference for s in log.scans], sampling)
     return relations or None
+
+
+def score_by_reference(source: LogSource) -> bool:
+    """Reads a corrected log's pose fields as its reference (``with_own_reference``) and, where
+    no relations file was given, scores by relations drawn from the reference poses; True
+    when it drew them."""
+    source.log = with_own_reference(source.log)
+    if source.relations is not None:
+        return False
+    source.relations = relations_from_reference(source.log)
+    return source.relations is not None
