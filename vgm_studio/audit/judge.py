@@ -109,7 +109,8 @@ def judge_pairs(
             return again.match, again
         return measured(matcher, scans[a], scans[b], z), again
 
-    # Each scan's structures are built once, before the threads share the matcher's cache.
+    # Every scan enters the matcher's cache here, before the threads share it; its voxel map
+    # and normals are still built on first use.
     for scan in scans:
         matcher.points(scan)
     threads = usable_threads()

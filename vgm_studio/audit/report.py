@@ -7,8 +7,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from vgm_studio.audit.run import AuditResult, Verdict
 from vgm_studio.graph.metrics import RelationErrors
 from vgm_studio.slam.report import finite_json
@@ -159,4 +157,4 @@ def audit_markdown(doc: dict[str, Any], pictures: Sequence[Path] = ()) -> str:
 def _num(value: Any, digits: int) -> str:
     if not isinstance(value, int | float) or not math.isfinite(value):
         return "n/a"
-    return f"{np.round(value, digits):.{digits}f}"
+    return f"{value:.{digits}f}"
