@@ -38,7 +38,7 @@ from vgm_studio.model.registry import HyperFlags, entry
 NETWORKS = ("vgmnet", "rgb-baseline")
 # ``--inputs``: what ``vgmnet`` reads besides the VGM, as ``vgm-studio train``'s switches
 # (``--no-figures``, ``--no-inliers``, ``--no-blind-head``); an ablation's fold models are kept
-# beside the default's. Until session 25 the default had no blind head and ``blind-head`` was
+# beside the default's. Before 2026-12-05 the default had no blind head and ``blind-head`` was
 # the ablation: those draws are ``default`` now, and the old default is ``no-blind-head``.
 INPUTS: dict[str, HyperFlags] = {
     "default": HyperFlags(),

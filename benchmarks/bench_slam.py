@@ -267,7 +267,7 @@ def main() -> None:
         type=Path,
         default=None,
         help="A vgmnet checkpoint to run as the validator instead of the bundled one (a model "
-        "of the same accuracy can still move a large building's run: BENCHMARKS.md, session 15).",
+        "of the same accuracy can still move a large building's run).",
     )
     parser.add_argument(
         "--from-json",

@@ -1,6 +1,6 @@
 """Leave-one-building-out folds: which edge files train and which test, never both.
 
-Kept apart from the benchmark script (no imports of its own helpers) so a test can check
+Kept apart from the benchmark script (no imports of its shared code) so a test can check
 the split on tiny files.
 """
 

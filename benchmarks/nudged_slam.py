@@ -5,7 +5,7 @@ Run: python benchmarks/nudged_slam.py SEED slam LOG [options]
 Every pose of the odometry gets Gaussian noise of σ 1e-9 (metres and radians), seeded by
 SEED: differences of the size that another machine's float kernels (BLAS, oneDNN, kiss-icp's
 parallel sums) make. A row whose figure moves far under such a nudge turns on a decision that
-rounding can flip, and may not hold on another machine (fhw in session 8: 0.068 m on one
+rounding can flip, and may not hold on another machine (fhw, once: 0.068 m on one
 machine, 1.108 m on another, with the same code and model). ``bench_slam.py --nudge`` runs it.
 """
 

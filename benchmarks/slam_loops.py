@@ -1,19 +1,18 @@
 """Validators judged on the loops a SLAM run meets, before one replaces the bundled model.
 
 ``bench_slam.py --model`` runs SLAM with another validator, but a run is chaotic: one loop
-decided otherwise early on sends a large building's run elsewhere (BENCHMARKS.md, sessions
-15–20), so its table cannot tell a worse validator from a different path. This script holds
-the loops still. It runs ``vgm-studio slam --loops-out`` once per building with the bundled
-model (cached in build/slam-loops/<the bundled model's hash>, so a new bundled model makes
-them again) and judges every matched loop with each checkpoint given:
-per building, the right loops and the wrong ones (against the corrected poses) passed at the
-SLAM run's loop bar, and the AUC. The Freiburg hospital has no reference and, as far as its
-path shows, almost no revisit (BENCHMARKS.md, session 20): its row counts the loops passed,
+decided otherwise early on sends a large building's run elsewhere, so its table cannot tell a
+worse validator from a different path. This script holds the loops still. It runs ``vgm-studio
+slam --loops-out`` once per building with the bundled model (cached in build/slam-loops/<the
+bundled model's hash>, so a new bundled model makes them again) and judges every matched loop
+with each checkpoint given: per building, the right loops and the wrong ones (against the
+corrected poses) passed at the SLAM run's loop bar, and the AUC. The Freiburg hospital has no
+reference and, as far as its path shows, almost no revisit: its row counts the loops passed,
 which are mostly corridor aliases.
 
 The benchmark loops (``bench_generalisation.py``) are reference poses nudged by random
 guesses; these are what place recognition and the window search propose, aliases included.
-A model can rank the first better and pass more of the second's wrong loops (session 23).
+A model can rank the first better and pass more of the second's wrong loops.
 
 Run: python benchmarks/slam_loops.py [MODEL.pt ...] [--bar P]   (default: the SLAM run's bar)
 """

@@ -1,6 +1,6 @@
 """Driving the studio as an annotator does: a real server process and a headless Chromium.
 
-A test and benchmark helper, not part of the package: the browser tests, the latency and
+Shared by the tests and benchmarks, not part of the package: the browser tests, the latency and
 trainer benchmarks use it. Needs Debian's
 ``chromium`` and Python's ``playwright`` (the test extras); nothing here downloads a browser.
 """

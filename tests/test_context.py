@@ -389,9 +389,9 @@ def test_a_checkpoint_keeps_the_covisible_crop_and_older_ones_read_without_it():
     assert Checkpoint.from_dict({**saved, "context": older}).context == Context(neighbours=2)
 
 
-def test_neighbours_placed_ahead_in_a_helper_process_are_those_placed_here(tmp_path, monkeypatch):
+def test_neighbours_placed_ahead_in_a_worker_process_are_those_placed_here(tmp_path, monkeypatch):
     """``PlacingAhead`` places every keyframe's neighbours in a spawned process: the mapper
-    that takes them holds, bit for bit, what it would have placed itself; a helper that dies
+    that takes them holds, bit for bit, what it would have placed itself; a worker that dies
     leaves the mapper placing the rest itself, with no error."""
     import time
 
@@ -405,21 +405,21 @@ def test_neighbours_placed_ahead_in_a_helper_process_are_those_placed_here(tmp_p
     context = Context(neighbours=2, covisible=True)
     here = LocalMapper(log.scans, poses, context)
     maps = [here.points(int(k), 10**6) for k in keyframes]
-    helped = LocalMapper(log.scans, poses, context)
-    ahead = PlacingAhead(helped, keyframes)
+    worked = LocalMapper(log.scans, poses, context)
+    ahead = PlacingAhead(worked, keyframes)
     deadline = time.monotonic() + 60
     while ahead._pending and time.monotonic() < deadline:
         time.sleep(0.1)
         ahead.collect()
     ahead.close()
-    assert set(here._placed) <= set(helped._placed)  # all of it came from the helper
-    assert any(v is not None for v in helped._placed.values())
+    assert set(here._placed) <= set(worked._placed)  # all of it came from the worker
+    assert any(v is not None for v in worked._placed.values())
     for key, pose in here._placed.items():
-        got = helped._placed[key]
+        got = worked._placed[key]
         assert (pose is None) == (got is None) and (pose is None or np.array_equal(pose, got))
     for k, want in zip(keyframes, maps, strict=True):
-        assert np.array_equal(helped.points(int(k), 10**6), want)
-    # A helper killed before it sent anything: the mapper places every neighbour itself.
+        assert np.array_equal(worked.points(int(k), 10**6), want)
+    # A worker killed before it sent anything: the mapper places every neighbour itself.
     alone = LocalMapper(log.scans, poses, context)
     dead = PlacingAhead(alone, keyframes)
     assert dead._pool is not None
@@ -432,7 +432,7 @@ def test_neighbours_placed_ahead_in_a_helper_process_are_those_placed_here(tmp_p
     assert not dead._pending and dead._pool is None and not alone._placed  # given up
     for k, want in zip(keyframes, maps, strict=True):
         assert np.array_equal(alone.points(int(k), 10**6), want)
-    # Where no process can be started at all, there is no helper and no error either.
+    # Where no process can be started at all, there is no worker and no error either.
     import multiprocessing
 
     def no_processes(_method: str) -> None:
@@ -462,8 +462,8 @@ time.sleep(600)
 """
 
 
-def test_a_helper_whose_parent_is_killed_outright_goes_too(tmp_path):
-    """kill -9 closes no pipe the helper waits on, so the helper watches its parent and goes
+def test_a_worker_whose_parent_is_killed_outright_goes_too(tmp_path):
+    """kill -9 closes no pipe the worker waits on, so the worker watches its parent and goes
     when it does: no orphan left placing neighbours for nobody."""
     import os
     import signal
@@ -478,20 +478,20 @@ def test_a_helper_whose_parent_is_killed_outright_goes_too(tmp_path):
         [sys.executable, "-c", _PARENT, str(log)], stdout=subprocess.PIPE, text=True
     )
     assert parent.stdout is not None
-    [helper] = map(int, parent.stdout.readline().split())
-    os.kill(helper, 0)  # alive
+    [worker] = map(int, parent.stdout.readline().split())
+    os.kill(worker, 0)  # alive
     parent.send_signal(signal.SIGKILL)
     parent.wait()
     deadline = time.monotonic() + 20
     while time.monotonic() < deadline:
         try:
-            os.kill(helper, 0)
+            os.kill(worker, 0)
         except ProcessLookupError:
             return
-        # A helper that went is a zombie until someone reaps it: it has no parent now but init.
-        with open(f"/proc/{helper}/stat") as stat:
+        # A worker that went is a zombie until someone reaps it: it has no parent now but init.
+        with open(f"/proc/{worker}/stat") as stat:
             if stat.read().split(")")[-1].split()[0] == "Z":
                 return
         time.sleep(0.2)
-    os.kill(helper, signal.SIGKILL)
-    raise AssertionError("the helper outlived its parent by 20 s")
+    os.kill(worker, signal.SIGKILL)
+    raise AssertionError("the worker outlived its parent by 20 s")

@@ -1,5 +1,5 @@
 """Progress without a terminal: plain lines on stderr, at most every few seconds, and one at
-the end; a bar on a terminal; one helper for every loop of the package."""
+the end; a bar on a terminal; one function for every loop of the package."""
 
 from __future__ import annotations
 
@@ -95,7 +95,7 @@ def test_a_failed_loop_prints_no_closing_line(monkeypatch):
     assert out.getvalue() == ""
 
 
-def test_every_progress_of_the_package_goes_through_the_helper():
+def test_every_progress_of_the_package_goes_through_one_function():
     users = []
     for path in PACKAGE.rglob("*.py"):
         if path.name == "progress.py" and path.parent == PACKAGE:

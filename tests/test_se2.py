@@ -1,4 +1,4 @@
-"""SE(2) helpers against matrix products."""
+"""SE(2) functions against matrix products."""
 
 from __future__ import annotations
 

@@ -9,7 +9,7 @@ reference or odometry in training, the run's odometry in SLAM), and left out unl
 match holds. The poses alone are not enough: on Belgioioso's sparse log the run's odometry is
 more than 12° off on one step in ten, and a model trained on well-placed neighbours then
 rejects three right loops in four. Matched, the neighbours sit within 2 cm and 0.25° of the
-reference (median; BENCHMARKS.md, session 28), wherever the guess came from.
+reference (median), wherever the guess came from.
 
 Two local maps can reach where the other side never looked (one walked on west, the other
 east): cells filled from one side only, as a wrong match's are. ``covisible`` keeps a
@@ -67,7 +67,7 @@ DEFAULT_CONTEXT = Context(neighbours=2, covisible=True)
 """The bundled model's context: what ``vgm-studio train`` draws by default, and the background
 trainer always, so that a version can start from the bundled model's weights. Two neighbours a
 side, cropped to what the other side saw: ahead of single scans on the leave-one-building-out
-table in two draws (BENCHMARKS.md, sessions 28–30)."""
+table in two draws."""
 
 
 Poses = Sequence["NDArray[np.float64] | None"] | NDArray[np.float64]

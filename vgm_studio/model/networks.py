@@ -134,7 +134,7 @@ class SparseConfig:
     training each head has its own loss, and the network's logit is the mean of the two. It is
     an ensemble, on one trunk, of a network that reads the figures and one that does not; the
     figures help on long corridors and mislead on buildings unlike the training ones
-    (BENCHMARKS.md, session 22), and the second head costs one small MLP a pair."""
+    (the leave-one-building-out table), and the second head costs one small MLP a pair."""
 
     fold: int = 8
     pointwise: int = 32

@@ -175,7 +175,7 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
         config.validation,
         scans,
         None if reference is None else reference[keyframes],
-        # A helper process where the run may use more than one core (not a one-CPU Ray task).
+        # A worker process where the run may use more than one core (not a one-CPU Ray task).
         LocalMaps(log.scans, odometry, keyframes, ahead=fe.match_threads() > 1),
     )
     t = time.perf_counter()

@@ -29,7 +29,7 @@ from vgm_studio.model.context import Context, LocalMapper, Placements, walk
 # round trips cost little.
 CHUNK = 64
 
-_mapper: LocalMapper | None = None  # the helper process's own
+_mapper: LocalMapper | None = None  # the worker process's own
 
 
 def _start(
@@ -37,7 +37,7 @@ def _start(
 ) -> None:
     global _mapper
     _mapper = LocalMapper(scans, poses, context, ScanMatcher(config))
-    # A parent killed outright (kill -9) closes no pipe the helper waits on: it would wait on.
+    # A parent killed outright (kill -9) closes no pipe the worker waits on: it would wait on.
     parent = os.getppid()
 
     def watch() -> None:
@@ -58,7 +58,7 @@ def _place(centres: list[int]) -> Placements:
 
 
 class PlacingAhead:
-    """Places the neighbours of ``centres`` in a helper process, in their order, and hands each
+    """Places the neighbours of ``centres`` in a worker process, in their order, and hands each
     batch to ``mapper`` once it is asked for a map and the batch is there.
 
     Args:
@@ -91,16 +91,16 @@ class PlacingAhead:
             self.close()
 
     def collect(self) -> None:
-        """Hands the mapper every batch that has arrived, in order; a helper that failed is
+        """Hands the mapper every batch that has arrived, in order; a worker that failed is
         given up, and the mapper places the rest itself."""
         while self._pending and self._pending[0].done():
             try:
                 self._mapper.adopt(self._pending.popleft().result())
-            except Exception:  # a helper that could not start or died: nothing is lost
+            except Exception:  # a worker that could not start or died: nothing is lost
                 self.close()
 
     def close(self) -> None:
-        """Stops the helper; work not done is dropped."""
+        """Stops the worker; work not done is dropped."""
         self._pending.clear()
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
