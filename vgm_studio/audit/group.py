@@ -22,7 +22,7 @@ from vgm_studio.core import se2
 from vgm_studio.graph.config import GraphConfig
 from vgm_studio.graph.pose_graph import GraphEdge, RunningEstimate
 from vgm_studio.slam.config import ConsistencyConfig
-from vgm_studio.slam.consistency import Loop, consistent, cycle_chi2
+from vgm_studio.slam.consistency import Loop, consistent, cycle_chi2s
 from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.uncertainty import UncertaintyGraph
 
@@ -73,15 +73,6 @@ def with_ties(factors: list[GraphEdge], poses: NDArray[np.float64]) -> list[Grap
     return factors + ties
 
 
-def dead_reckoning(links: Sequence[GraphEdge], count: int) -> NDArray[np.float64]:
-    """Poses composed along the chain from vertex 0 (each vertex from the one before it)."""
-    step = {e.b: e for e in links if e.b == e.a + 1}
-    poses = np.zeros((count, 3))
-    for k in range(1, count):
-        poses[k] = se2.compose(poses[k - 1], step[k].measurement)
-    return poses
-
-
 def check_loops(
     edges: Sequence[SlamEdge],
     covariances: Sequence[NDArray[np.float64]],
@@ -117,15 +108,7 @@ def check_loops(
     if not config.enabled:
         return {}
     links = chain(edges, covariances, poses, graph)
-    start = dead_reckoning(links, len(poses))
-    estimate = RunningEstimate(start[0], graph)
-    uncertainty = UncertaintyGraph()
-    for k in range(1, len(poses)):
-        estimate.add_keyframe(start[k])
-    for link in links:
-        estimate.add_edge(link)
-        uncertainty.add(link)
-    estimate.update()
+    grow = _Growth(links, len(poses), graph)
     loops = sorted(
         (i for i, e in enumerate(edges) if e.kind == "loop" and e.validated),
         key=lambda i: edges[i].b,
@@ -134,6 +117,10 @@ def check_loops(
         chosen = [i for i in loops if first <= edges[i].b < first + block]
         if not chosen:
             continue
+        # The chain grows to the block's end only: the searches and iSAM2 work on the part
+        # that exists, as in ``slam``. The vertices after it hang off the chain's end, so
+        # they change no loop's test.
+        grow.to(first + block)
         checked = [
             Loop(
                 edges[i].a,
@@ -144,6 +131,7 @@ def check_loops(
             )
             for i in chosen
         ]
+        estimate, uncertainty = grow.estimate, grow.uncertainty
         flags = consistent(checked, estimate.poses, uncertainty, config, drift=uncertainty)
         closed = False
         for i, loop, ok in zip(chosen, checked, flags, strict=True):
@@ -155,7 +143,9 @@ def check_loops(
                 uncertainty.add(factor)
                 closed = True
         if closed:
-            estimate.update(extra_iterations=2)
+            grow.estimate.update(extra_iterations=2)
+    grow.to(len(poses))
+    estimate, uncertainty = grow.estimate, grow.uncertainty
     gate = float(chi2.ppf(config.probability, 3))
     failed = [i for i, e in enumerate(edges) if e.kind == "loop" and not e.validated]
     # Support comes from the loops the group check kept and from the other failed loops: a
@@ -171,6 +161,36 @@ def check_loops(
         edges[i].kept = True
         edges[i].consistency = "kept"
     return found
+
+
+class _Growth:
+    """The group check's estimate and uncertainty, grown along the chain on demand: each new
+    vertex starts where its step from the current estimate of the one before puts it."""
+
+    def __init__(self, links: Sequence[GraphEdge], count: int, graph: GraphConfig) -> None:
+        self._steps: dict[int, list[GraphEdge]] = {}
+        for e in links:
+            self._steps.setdefault(e.b, []).append(e)
+        self._count = count
+        self.estimate = RunningEstimate(np.zeros(3), graph)
+        self.uncertainty = UncertaintyGraph()
+
+    def to(self, end: int) -> None:
+        """Adds the vertices before ``end`` and their steps. They wait for the next update
+        (the next loop closed): a chain's new end has no loop to move it, so where each step
+        puts a vertex is already the estimate's answer."""
+        end = min(end, self._count)
+        have = len(self.estimate)
+        if have >= end:
+            return
+        last = self.estimate.poses[have - 1]
+        for k in range(have, end):
+            steps = self._steps[k]
+            last = se2.compose(last, steps[0].measurement)
+            self.estimate.add_keyframe(last)
+            for step in steps:
+                self.estimate.add_edge(step)
+                self.uncertainty.add(step)
 
 
 def rescue(
@@ -193,19 +213,24 @@ def rescue(
     need, span = support
     if need <= 0 or not failed or not held:
         return {}
-    ends = sorted({x for i in failed for x in (loop_of(i).a, loop_of(i).b)})
-    rel = dict(zip(ends, uncertainty.relative(ends, len(poses)), strict=True))
     others = [loop_of(j) for j in held]
     a_of = np.array([o.a for o in others])
     b_of = np.array([o.b for o in others])
-    out: dict[int, int] = {}
+    nearby: dict[int, NDArray[np.int64]] = {}
     for i in failed:
         one = loop_of(i)
         near = np.flatnonzero((np.abs(a_of - one.a) <= span) & (np.abs(b_of - one.b) <= span))
         near = near[[held[int(k)] != i for k in near]]
-        if len(near) < need:
-            continue
-        agree = sum(cycle_chi2(one, others[int(k)], poses, rel) <= gate for k in near)
+        if len(near) >= need:
+            nearby[i] = near
+    # Only the loops with enough held loops near them are tested: the projection is asked
+    # for their ends alone (a fifth of the failed loops' on Killian Court).
+    ends = sorted({x for i in nearby for x in (loop_of(i).a, loop_of(i).b)})
+    rel = dict(zip(ends, uncertainty.relative(ends, len(poses)), strict=True))
+    out: dict[int, int] = {}
+    for i, near in nearby.items():
+        one = loop_of(i)
+        agree = int(np.sum(cycle_chi2s(one, [others[int(k)] for k in near], poses, rel) <= gate))
         if agree >= need:
             out[i] = int(agree)
     return out

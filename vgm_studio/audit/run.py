@@ -115,8 +115,8 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
             lines.append(0)
     seconds["injecting"] = time.perf_counter() - t
     # The model loads before the pairs are matched; where the graph is tied to a log's scans,
-    # its helper places the vertices' neighbours in the log meanwhile (the matches of a graph's
-    # own scans place them: ``chain_placements``).
+    # its worker process places the vertices' neighbours in the log meanwhile (the matches of
+    # a graph's own scans place them: ``chain_placements``).
     t = time.perf_counter()
     validator = make_validator(inp, config, scans, not inp.inline and usable_threads() > 1)
     seconds["loading"] = time.perf_counter() - t
@@ -139,7 +139,7 @@ def run_audit(inp: AuditInput, config: AuditConfig, progress: bool = True) -> Au
         ]
         t = time.perf_counter()
         if inp.inline:
-            validator.adopt(chain_placements(inp, edges, again))
+            validator.adopt(chain_placements(inp, edges, again, validator.context))
         judgement = judge_edges(validator, config, scans, edges, progress)
     finally:
         validator.close()

@@ -12,22 +12,18 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from vgm_studio.audit.config import AuditConfig
 from vgm_studio.audit.inputs import AuditInput
 from vgm_studio.audit.judge import Rematch, shared_view
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
-from vgm_studio.model.context import DEFAULT_CONTEXT, Placements
+from vgm_studio.model.context import DEFAULT_CONTEXT, Context, Placements, walk
 from vgm_studio.progress import counter
 from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.pipeline import MIN_POINTS, dense_reference
 from vgm_studio.slam.validation import EdgeValidator, LocalMaps
 
-# Neighbours placed from the chain, in steps: past the Killian graph's 0.5 m spacing, two
-# neighbours a side within a local map's 2 m reach.
-_REACH = 4
 # Edges the validator reads at once: its batches fill, and the bar moves often enough.
 _CHUNK = 512
 
@@ -99,7 +95,7 @@ def make_validator(
     """The validator, its local maps drawn from the log: from ``scans``, the vertices' scans
     that keep their points, where the graph's own scans are the log (a map asks for a
     vertex's points once per edge it is in: 65,000 times on Killian Court); ``ahead`` places
-    the neighbours in a helper process meanwhile (``slam.placing``)."""
+    the neighbours in a worker process meanwhile (``slam.placing``)."""
     reference = dense_reference(inp.log, inp.scan_poses)
     log_scans = scans if inp.inline else inp.log.scans
     local = LocalMaps(log_scans, inp.scan_poses, inp.vertex_scans, ahead)
@@ -112,26 +108,30 @@ def make_validator(
 
 
 def chain_placements(
-    inp: AuditInput, edges: Sequence[SlamEdge], again: Sequence[Rematch]
+    inp: AuditInput, edges: Sequence[SlamEdge], again: Sequence[Rematch], context: Context
 ) -> Placements:
-    """Of a graph's own scans (the log), a vertex's neighbours in a local map are the
-    vertices next to it, and the re-matches of the sequential edges have placed them already:
-    each neighbour up to ``_REACH`` steps along, composed over steps that all held (as
-    ``LocalMapper.placed`` holds a match). It spares a match per neighbour, four per vertex."""
-    floor = DEFAULT_CONTEXT.min_inliers
-    step: dict[int, NDArray[np.float64] | None] = {}
+    """Of a graph's own scans (the log), the neighbours each vertex's local map takes
+    (``walk`` with ``context``) placed by the re-matches of the sequential edges between
+    them, composed over steps that all held (as ``LocalMapper.placed`` holds a match). It
+    spares a match per neighbour, four per vertex: 1 s of Killian Court's 4 s of validation
+    where a fixed reach of steps missed the neighbours of a robot standing still."""
+    count = len(inp.log)
+    steps = [np.zeros(3)] * max(count - 1, 0)
+    broken = np.ones(max(count - 1, 0), dtype=np.int64)  # steps whose re-match did not hold
     for e, r in zip(edges, again, strict=True):
-        if e.kind == "sequential":
-            holds = r.converged and r.inlier_ratio >= floor
-            step[e.a] = r.match.estimate if holds else None
+        if e.kind == "sequential" and r.converged and r.inlier_ratio >= context.min_inliers:
+            steps[e.a], broken[e.a] = r.match.estimate, 0
+    # Vertex j in k's frame is between(along[k], along[j]); it holds where no broken step
+    # lies between them.
+    along = np.zeros((count, 3))
+    for k in range(1, count):
+        along[k] = se2.compose(along[k - 1], steps[k - 1])
+    breaks = np.concatenate([[0], np.cumsum(broken)])
     placed: Placements = {}
-    for k in range(len(inp.log)):
-        pose: NDArray[np.float64] | None = np.zeros(3)
-        for j in range(k + 1, min(k + 1 + _REACH, len(inp.log))):
-            s = step.get(j - 1)
-            pose = None if pose is None or s is None else se2.compose(pose, s)
-            placed[(k, j)] = pose
-            placed[(j, k)] = None if pose is None else se2.inverse(pose)
+    for k in range(count):
+        for j in walk(inp.scan_poses, k, context):
+            held = breaks[j] == breaks[k]
+            placed[(k, j)] = se2.between(along[k], along[j]) if held else None
     return placed
 
 

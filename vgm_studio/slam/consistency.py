@@ -104,10 +104,9 @@ def consistent(
         if fit <= gate:
             votes.add_edge(_LIKELY, i, chi2=fit)
     for i in range(len(loops)):
-        for j in range(i + 1, len(loops)):
-            cycle = cycle_chi2(loops[i], loops[j], poses, rel)
-            if cycle <= gate:
-                votes.add_edge(i, j, chi2=cycle)
+        cycles = cycle_chi2s(loops[i], loops[i + 1 :], poses, rel)
+        for j in np.flatnonzero(cycles <= gate):
+            votes.add_edge(i, i + 1 + int(j), chi2=float(cycles[j]))
     members = {i for i in _heaviest(votes) if i not in _ESTIMATE}
     if drift is not None and members:
         members -= _unsupported(loops, members, votes, poses, drift, gate, config)
@@ -243,18 +242,30 @@ def _fits_estimate(loop: Loop, poses: NDArray[np.float64], rel: Relative) -> flo
 def cycle_chi2(one: Loop, two: Loop, poses: NDArray[np.float64], rel: dict[int, Relative]) -> float:
     """Squared Mahalanobis distance of the cycle two loops close with the graph; ``rel``
     holds the graph's uncertainty seen from ``one``'s two ends."""
-    chain_b = se2.between(poses[one.b], poses[two.b])
-    chain_a = se2.between(poses[one.a], poses[two.a])
+    return float(cycle_chi2s(one, [two], poses, rel)[0])
+
+
+def cycle_chi2s(
+    one: Loop, others: Sequence[Loop], poses: NDArray[np.float64], rel: dict[int, Relative]
+) -> NDArray[np.float64]:
+    """``cycle_chi2`` of ``one`` with each of ``others``, at once (a block's pairs number
+    thousands on a large building)."""
+    if not others:
+        return np.zeros(0)
+    a2 = np.array([two.a for two in others])
+    b2 = np.array([two.b for two in others])
+    chain_b = se2.between(poses[one.b], poses[b2])
+    chain_a = se2.between(poses[one.a], poses[a2])
     # b₂ in a₁'s frame, once through loop one, once through loop two.
     via_one = se2.compose(one.measurement, chain_b)
-    via_two = se2.compose(chain_a, two.measurement)
+    via_two = se2.compose(chain_a, np.array([two.measurement for two in others]))
     error = se2.between(via_one, via_two)
     vt1, vr1 = _variances(one.covariance)
-    vt2, vr2 = _variances(two.covariance)
+    cov2 = np.array([two.covariance for two in others])
+    vt2, vr2 = (cov2[:, 0, 0] + cov2[:, 1, 1]) / 2.0, cov2[:, 2, 2]
     # A heading error of a loop swings the chain after it by its length.
-    lever = float(chain_b[0] ** 2 + chain_b[1] ** 2)
-    position = (
-        vt1 + vt2 + vr1 * lever + rel[one.b].position_var[two.b] + rel[one.a].position_var[two.a]
-    )
-    heading = vr1 + vr2 + rel[one.b].heading_var[two.b] + rel[one.a].heading_var[two.a]
-    return _mahalanobis(error, position, heading)
+    lever = chain_b[:, 0] ** 2 + chain_b[:, 1] ** 2
+    ra, rb = rel[one.a], rel[one.b]
+    position = vt1 + vt2 + vr1 * lever + rb.position_var[b2] + ra.position_var[a2]
+    heading = vr1 + vr2 + rb.heading_var[b2] + ra.heading_var[a2]
+    return np.asarray((error[:, 0] ** 2 + error[:, 1] ** 2) / position + error[:, 2] ** 2 / heading)

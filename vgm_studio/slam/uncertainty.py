@@ -90,24 +90,29 @@ class UncertaintyGraph:
         vt, vr, ln = vt0[keep], vr0[keep], np.array(self._len)[keep]
         graph = coo_matrix((weight, (a, b)), shape=(n, n)).tocsr()
         dist, pred = dijkstra(graph, directed=False, indices=sources, return_predecessors=True)
-        values = [
-            coo_matrix((np.r_[v, v], (np.r_[a, b], np.r_[b, a])), shape=(n, n)).tocsr()
-            for v in (vt, vr, ln)
-        ]
-        return [_accumulate(d, p, values, count) for d, p in zip(dist, pred, strict=True)]
+        # Each edge's index + 1, both ways, so one lookup finds a tree edge's three values.
+        ids = np.arange(1, len(a) + 1, dtype=np.float64)
+        index = coo_matrix((np.r_[ids, ids], (np.r_[a, b], np.r_[b, a])), shape=(n, n)).tocsr()
+        values = np.vstack([np.zeros((1, 3)), np.column_stack([vt, vr, ln])])
+        return [_accumulate(d, p, index, values, count) for d, p in zip(dist, pred, strict=True)]
 
 
 def _accumulate(
-    dist: NDArray[np.float64], pred: NDArray[np.int32], values: list[Any], count: int
+    dist: NDArray[np.float64],
+    pred: NDArray[np.int32],
+    index: Any,
+    values: NDArray[np.float64],
+    count: int,
 ) -> Relative:
-    """Sums each edge's variances and length from the source down the shortest-path tree."""
+    """Sums each edge's variances and length from the source down the shortest-path tree
+    (``index``: an edge's row of ``values``, by its two ends; row 0 is zeros)."""
     n = len(dist)
     nodes = np.arange(n)
     reach = np.isfinite(dist)
     parent = np.where(reach & (pred >= 0), pred, nodes)
     # Each node's own edge to its parent, then pointer jumping: after k rounds every node holds
     # the sums over its 2^k nearest ancestors' edges, so log2(n) rounds sum whole paths.
-    acc = np.stack([np.asarray(v[parent, nodes]).ravel() for v in values], axis=1)
+    acc = values[np.asarray(index[parent, nodes]).ravel().astype(np.int64)]
     jump = parent
     # The source (and an unreached node) points to itself and holds zero.
     while not np.array_equal(jump, jump[jump]):

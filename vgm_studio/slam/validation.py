@@ -22,7 +22,7 @@ from vgm_studio.datasets.scans import Scan
 from vgm_studio.errors import InputError
 from vgm_studio.matching.matcher import MatchResult
 from vgm_studio.matching.reference_labels import reference_label
-from vgm_studio.model.context import LocalMapper, Placements
+from vgm_studio.model.context import Context, LocalMapper, Placements
 from vgm_studio.model.features import sample_from_scans
 from vgm_studio.model.registry import VALIDATOR_MODELS
 from vgm_studio.slam.config import ValidationConfig
@@ -43,7 +43,7 @@ class LocalMaps:
         poses: (N, 3) every scan's pose from the run's odometry: which scans are a
             keyframe's neighbours, and where each neighbour's match to it starts.
         keyframes: Each keyframe's index in the log.
-        ahead: Place the keyframes' neighbours in a helper process ahead of need
+        ahead: Place the keyframes' neighbours in a worker process ahead of need
             (``slam/placing.py``): the same maps, sooner where a core is free.
     """
 
@@ -146,9 +146,14 @@ class EdgeValidator:
             self._maps[0].adopt(placed)
 
     def close(self) -> None:
-        """Stops the helper that places neighbours ahead, if any."""
+        """Stops the worker that places neighbours ahead, if any."""
         if self._ahead is not None:
             self._ahead.close()
+
+    @property
+    def context(self) -> Context:
+        """The local maps the model reads (one scan a side without a model)."""
+        return self.model.context if self.model is not None else Context()
 
     @property
     def threshold(self) -> float:
