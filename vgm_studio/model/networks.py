@@ -11,6 +11,8 @@ from scipy.sparse import csr_matrix
 from torch import nn
 from torch.nn.utils.fusion import fuse_conv_bn_eval
 
+from vgm_studio.model.sparse_layers import pointwise_at_cells, sparse_block, update_running_stats
+
 
 def _block(c_in: int, c_out: int, stride: int = 2) -> nn.Sequential:
     return nn.Sequential(
@@ -109,9 +111,9 @@ class VGMNetPaper(nn.Module):
         assert isinstance(conv, nn.Conv2d) and conv.bias is not None
         assert isinstance(first, nn.Sequential)
         rows, at = torch.unique(index, return_inverse=True)
-        pre = _pointwise_at_cells(conv, len(rows), at, channel, value)
+        pre = pointwise_at_cells(conv, len(rows), at, channel, value)
         empty = torch.relu(conv.bias)
-        x = _sparse_block(first, batch, side, rows, torch.relu(pre) - empty, empty)
+        x = sparse_block(first, batch, side, rows, torch.relu(pre) - empty, empty)
         logit: torch.Tensor = self.head(self.features[3:](x))
         return logit
 
@@ -227,7 +229,7 @@ class VGMNet(nn.Module):
             occupied, empty = self._stem_eval(len(rows), at, channel, value)
         first = self.features[3]
         assert isinstance(first, nn.Sequential)
-        x = _sparse_block(first, batch, side, rows, occupied - empty, empty)
+        x = sparse_block(first, batch, side, rows, occupied - empty, empty)
         return self._heads(self.features[4:](x), extra)
 
     def _stem_eval(
@@ -262,7 +264,7 @@ class VGMNet(nn.Module):
         batch norm's running averages as ``nn.BatchNorm2d`` would."""
         conv, norm = self.features[0], self.features[1]
         assert isinstance(conv, nn.Conv2d) and isinstance(norm, nn.BatchNorm2d)
-        pre = _pointwise_at_cells(conv, rows, at, channel, value)
+        pre = pointwise_at_cells(conv, rows, at, channel, value)
         bias = conv.bias if conv.bias is not None else conv.weight.new_zeros(conv.out_channels)
         # Sums in float64: E[x²] − E[x]² over ~10⁵ positions loses float32's digits.
         blank = positions - rows
@@ -270,7 +272,7 @@ class VGMNet(nn.Module):
         mean = (pre64.sum(0) + blank * bias64) / positions
         var = (pre64.pow(2).sum(0) + blank * bias64.pow(2)) / positions - mean.pow(2)
         var = var.clamp(min=0.0)
-        _update_running_stats(norm, mean.detach(), var.detach(), positions)
+        update_running_stats(norm, mean.detach(), var.detach(), positions)
         scale = norm.weight / torch.sqrt(var.float() + norm.eps)
         occupied = (pre - mean.float()) * scale + norm.bias
         empty = (bias - mean.float()) * scale + norm.bias
@@ -288,90 +290,6 @@ class VGMNet(nn.Module):
             weight = weight * scale
             shift = (shift - norm.running_mean) * scale + norm.bias
         return weight, shift
-
-
-def _pointwise_at_cells(
-    conv: nn.Conv2d, rows: int, at: torch.Tensor, channel: torch.Tensor, value: torch.Tensor
-) -> torch.Tensor:
-    """A 1×1 convolution's output (bias included) at ``rows`` occupied positions, from their
-    cells: cell k is at position ``at[k]``, in input channel ``channel[k]``. Differentiable."""
-    cells = conv.weight.new_zeros(rows, conv.in_channels)
-    cells.index_put_((at, channel), value.to(cells.dtype), accumulate=True)
-    out = cells @ conv.weight[:, :, 0, 0].T
-    return out + conv.bias if conv.bias is not None else out
-
-
-def _sparse_block(
-    block: nn.Sequential,
-    batch: int,
-    side: int,
-    rows: torch.Tensor,
-    delta: torch.Tensor,
-    empty: torch.Tensor,
-) -> torch.Tensor:
-    """A (convolution, norm, activation) block over a field that is ``empty`` everywhere but at
-    ``rows`` (pair·side² + position), where it is ``empty + delta``.
-
-    Convolution is linear: its output is the convolution of the constant field (one image,
-    borders and all, broadcast over the batch) plus, for each kernel tap, each occupied
-    position's ``delta`` times that tap's weights, added where the tap puts it.
-    """
-    conv = block[0]
-    assert isinstance(conv, nn.Conv2d) and conv.groups == 1 and conv.dilation == (1, 1)
-    padding = conv.padding
-    assert not isinstance(padding, str)  # "same"/"valid" are not used by our blocks
-    (kh, kw), (sh, sw), (ph, pw) = conv.kernel_size, conv.stride, padding
-    channels = conv.out_channels
-    field = empty.view(1, -1, 1, 1).expand(1, -1, side, side)
-    base = nn.functional.conv2d(field, conv.weight, conv.bias, conv.stride, conv.padding)
-    oh, ow = base.shape[2:]
-    out = base.permute(0, 2, 3, 1).repeat(batch, 1, 1, 1).view(-1, channels)  # one copy
-    pair, position = rows // (side * side), rows % (side * side)
-    i, j = position // side, position % side
-    # Where each row tap and each column tap lands (and whether it does), worked out once
-    # each instead of once per kernel tap: a 3×3 kernel's nine taps share three of each.
-    down, across = [], []
-    for ki in range(kh):
-        ti = i + ph - ki  # stride × output row, when the tap lands on one
-        down.append(((ti % sh == 0) & (ti >= 0) & (ti < sh * oh), pair * oh + ti // sh))
-    for kj in range(kw):
-        tj = j + pw - kj
-        across.append(((tj % sw == 0) & (tj >= 0) & (tj < sw * ow), tj // sw))
-    targets, terms = [], []
-    for ki, (row_ok, row) in enumerate(down):
-        for kj, (col_ok, col) in enumerate(across):
-            ok = row_ok & col_ok
-            targets.append(row[ok] * ow + col[ok])
-            terms.append(delta[ok] @ conv.weight[:, :, ki, kj].T)
-    target, term = torch.cat(targets), torch.cat(terms)
-    if torch.is_grad_enabled() and term.requires_grad:
-        # In training an in-place add would have autograd keep a copy of the whole field.
-        out = out.index_add(0, target, term)
-    else:
-        out.index_add_(0, target, term)
-    x = out.view(batch, oh, ow, channels).permute(0, 3, 1, 2)
-    result: torch.Tensor = block[2](block[1](x))
-    return result
-
-
-def _update_running_stats(
-    norm: nn.BatchNorm2d, mean: torch.Tensor, var: torch.Tensor, count: int
-) -> None:
-    """Moves ``norm``'s running averages by a batch's mean and biased variance over ``count``
-    values, as ``nn.BatchNorm2d`` does in training (the running variance is unbiased;
-    momentum None is a cumulative average)."""
-    if not norm.track_running_stats:
-        return
-    assert norm.running_mean is not None and norm.running_var is not None
-    assert norm.num_batches_tracked is not None
-    with torch.no_grad():
-        norm.num_batches_tracked.add_(1)
-        factor = norm.momentum
-        if factor is None:
-            factor = 1.0 / float(norm.num_batches_tracked)
-        unbiased = var * count / max(count - 1, 1)
-        norm.running_mean.mul_(1 - factor).add_(factor * mean.to(norm.running_mean.dtype))
-        norm.running_var.mul_(1 - factor).add_(factor * unbiased.to(norm.running_var.dtype))
 
 
 def fuse_batch_norm(net: nn.Module) -> nn.Module:

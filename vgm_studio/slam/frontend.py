@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.graph.config import GraphConfig
-from vgm_studio.graph.pose_graph import GraphEdge, RunningEstimate, edge_covariance
+from vgm_studio.graph.pose_graph import GraphEdge, RunningEstimate
 from vgm_studio.matching.correlative import CorrelativeConfig, LoopMatcher, SearchWindow
 from vgm_studio.matching.descriptor import PlaceIndex
 from vgm_studio.matching.matcher import ScanMatcher
@@ -34,8 +34,10 @@ from vgm_studio.progress import counter
 from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
 from vgm_studio.slam.consistency import Loop, consistent
 from vgm_studio.slam.edges import WINDOW_SOURCES, SlamEdge, SlamEdgeKind, Validate
+from vgm_studio.slam.factors import fallback_edge, graph_edge, narrow_odometry, odometry_edge
 from vgm_studio.slam.loop_search import (
     Candidate,
+    false_loop_pairs,
     place_candidates,
     trail,
     unclosed_candidates,
@@ -46,69 +48,6 @@ from vgm_studio.slam.turned import is_turned, trail_overlap
 from vgm_studio.slam.uncertainty import UncertaintyGraph
 
 _T = TypeVar("_T")
-
-
-def graph_edge(edge: SlamEdge, config: GraphConfig) -> GraphEdge:
-    """The factor of a matched edge: its estimate, with the matcher's covariance floored."""
-    return GraphEdge(
-        edge.a,
-        edge.b,
-        edge.estimate,
-        edge_covariance(edge.match.covariance, config),
-        known_inlier=edge.kind == "sequential",
-    )
-
-
-def odometry_edge(a: int, b: int, odometry: NDArray[np.float64], config: GraphConfig) -> GraphEdge:
-    """The odometry fallback that keeps the chain whole where a sequential edge was rejected."""
-    delta = se2.between(odometry[a], odometry[b])
-    cov = edge_covariance(None, config, distance=float(math.hypot(delta[0], delta[1])))
-    return GraphEdge(a, b, delta, cov, known_inlier=True)
-
-
-def fallback_edge(
-    edge: SlamEdge, odometry: NDArray[np.float64], graph: GraphConfig, front_end: FrontEndConfig
-) -> GraphEdge:
-    """The odometry that joins the keyframes of a sequential edge left out of the graph.
-
-    Wide (``graph.odometry_sigma_*``) where the validator rejected the match: there the
-    odometry disagreed with a scan match, and is often far off. Narrow
-    (``front_end.drift_odometry_sigma_*``) where the slide check took a kept match out: a
-    match across two steps confirmed the odometry there, and a wide step would leave the graph
-    unsure for nothing.
-    """
-    if edge.consistency == "rejected":
-        graph = narrow_odometry(graph, front_end)
-    return odometry_edge(edge.a, edge.b, odometry, graph)
-
-
-def narrow_odometry(graph: GraphConfig, front_end: FrontEndConfig) -> GraphConfig:
-    """``graph`` with the odometry σ the loop search reads."""
-    return dataclasses.replace(
-        graph,
-        odometry_sigma_xy=front_end.drift_odometry_sigma_xy,
-        odometry_sigma_theta_deg=front_end.drift_odometry_sigma_theta_deg,
-    )
-
-
-def false_loop_pairs(odometry: NDArray[np.float64], config: FrontEndConfig) -> dict[int, list[int]]:
-    """Keyframe pairs for injected false loops, keyed by the later keyframe.
-
-    Each pair is at least ``loop_min_gap`` keyframes and ``false_loop_distance`` metres
-    apart in odometry, so a guess that puts them at one place is wrong by construction.
-    """
-    rng = np.random.default_rng([config.seed, 2])
-    out: dict[int, list[int]] = {}
-    count = len(odometry)
-    for _ in range(100 * config.false_loops):
-        if sum(map(len, out.values())) >= config.false_loops or count <= config.loop_min_gap:
-            break
-        b = int(rng.integers(config.loop_min_gap, count))
-        a = int(rng.integers(0, b - config.loop_min_gap + 1))
-        far = math.dist(odometry[a, :2], odometry[b, :2]) >= config.false_loop_distance
-        if far and a not in out.get(b, []):
-            out.setdefault(b, []).append(a)
-    return out
 
 
 class FrontEnd:

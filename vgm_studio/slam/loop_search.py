@@ -235,3 +235,23 @@ def place_candidates(
             guess = np.array([0.0, 0.0, m.yaw])
             out.append(Candidate(m.key, b, "place", guess, config.window_linear[1], angular))
     return out
+
+
+def false_loop_pairs(odometry: NDArray[np.float64], config: FrontEndConfig) -> dict[int, list[int]]:
+    """Keyframe pairs for injected false loops, keyed by the later keyframe.
+
+    Each pair is at least ``loop_min_gap`` keyframes and ``false_loop_distance`` metres
+    apart in odometry, so a guess that puts them at one place is wrong by construction.
+    """
+    rng = np.random.default_rng([config.seed, 2])
+    out: dict[int, list[int]] = {}
+    count = len(odometry)
+    for _ in range(100 * config.false_loops):
+        if sum(map(len, out.values())) >= config.false_loops or count <= config.loop_min_gap:
+            break
+        b = int(rng.integers(config.loop_min_gap, count))
+        a = int(rng.integers(0, b - config.loop_min_gap + 1))
+        far = math.dist(odometry[a, :2], odometry[b, :2]) >= config.false_loop_distance
+        if far and a not in out.get(b, []):
+            out.setdefault(b, []).append(a)
+    return out

@@ -17,7 +17,8 @@ from vgm_studio.matching.candidates import select_keyframes
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.slam.config import SlamConfig
 from vgm_studio.slam.edges import SlamEdge
-from vgm_studio.slam.frontend import FrontEnd, fallback_edge, graph_edge
+from vgm_studio.slam.factors import fallback_edge, graph_edge
+from vgm_studio.slam.frontend import FrontEnd
 from vgm_studio.slam.odometry import scan_odometry
 from vgm_studio.slam.validation import (
     EdgeValidator,
