@@ -2,7 +2,7 @@
 
 Usage:
     python benchmarks/bench_trainer.py [--labels 300] [--pace 1.0] [--preset loop]
-                                       [--plot assets/readme/trainer-curves.png] [--results R.json]
+                                       [--plot docs/images/trainer-curves.png] [--results R.json]
     python benchmarks/bench_trainer.py replot R.json 300 OUT.png
 
 For each labeling order (log order, then "most uncertain first"), from an empty workspace and

@@ -1,6 +1,6 @@
 """The README's pair of heatmap pictures: a right and a wrong edge, raw cells beside spread.
 
-    python benchmarks/heatmap_pictures.py [--workspace vgm-demo] [--out assets/readme]
+    python benchmarks/heatmap_pictures.py [--workspace vgm-demo] [--out docs/images]
 
 Draws the studio's 3D-view heatmap (cells only, +y up, 4 pixels a cell) of the demo's first
 edge (sequential, 100 % inliers, 0.1 cm off its reference) and of a loop edge slid by one door
@@ -58,7 +58,7 @@ def picture(store: LabelStore, edge_id: str, what: str) -> np.ndarray:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workspace", type=Path, default=Path("vgm-demo"))
-    parser.add_argument("--out", type=Path, default=Path("assets/readme"))
+    parser.add_argument("--out", type=Path, default=Path("docs/images"))
     args = parser.parse_args()
     if not (args.workspace / "labels.sqlite").exists():
         demo = ["vgm-studio", "demo", "--no-serve", "--workspace", str(args.workspace)]
