@@ -11,7 +11,9 @@ Usage:
    has arrived.
    Twice: with ``--no-trainer``, then with the background trainer (retraining every 25 labels),
    and the presses made while it was training are also reported alone.
-2. ``vgm-studio demo``: seconds from the process start until it serves, with a fresh workspace
+2. Deep links: ``?edge=ID`` opened in a new tab, seconds from the page load until the tab
+   shows that edge (polled in the page at every frame), for edges spread over the queue.
+3. ``vgm-studio demo``: seconds from the process start until it serves, with a fresh workspace
    (candidates made) and with the workspace kept from the first run.
 """
 
@@ -65,6 +67,32 @@ def label_latency(count: int, work: Path, trainer: bool) -> tuple[list[float], l
     return latencies, training
 
 
+def deep_links(count: int, work: Path) -> list[float]:
+    """Seconds from loading ``?edge=ID`` until the tab shows that edge, ``count`` edges."""
+    ws = work / "intel"
+    log = datasets_dir() / "intel" / "intel.gfs.log"
+    port = free_port()
+    seconds = []
+    with studio_process(["label", str(log), "--workspace", str(ws), "--no-trainer"], port):
+        edges = sorted(LabelStore(ws).reference_labels())
+        targets = edges[:: max(1, len(edges) // count)][:count]
+        with chromium(viewport=(1280, 720)) as browser:
+            for edge in targets:
+                page = browser.new_page()
+                page.goto(f"http://127.0.0.1:{port}/?edge={edge}")
+                loaded = time.perf_counter()
+                page.wait_for_function(
+                    "id => [...document.querySelectorAll('code')]"
+                    ".some(c => c.innerText.trim() === id)",
+                    arg=edge,
+                    polling="raf",
+                    timeout=30_000,
+                )
+                seconds.append(time.perf_counter() - loaded)
+                page.close()
+    return seconds
+
+
 def readme_picture(port: int, path: Path) -> None:
     """The README's picture: the first edge "most uncertain first", the panel from its top."""
     with chromium(viewport=(1400, 900)) as browser:
@@ -97,6 +125,8 @@ def demo_startup(work: Path, screenshot: Path | None = None) -> tuple[float, flo
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--edges", type=int, default=200)
+    parser.add_argument("--links", type=int, default=20, help="Deep links opened.")
+    parser.add_argument("--links-only", action="store_true", help="Measure the deep links alone.")
     parser.add_argument(
         "--screenshot", type=Path, help="Also save the demo's first edge, e.g. for README."
     )
@@ -105,7 +135,11 @@ def main() -> None:
         dir=REPO / "build" if (REPO / "build").is_dir() else None
     ) as tmp:
         work = Path(tmp)
+        if args.links_only:
+            _print_links(deep_links(args.links, work))
+            return
         alone, _ = label_latency(args.edges, work, trainer=False)
+        links = deep_links(args.links, work)
         beside, training = label_latency(args.edges, work, trainer=True)
         cold, warm = demo_startup(work, args.screenshot)
     during = [t for t, busy in zip(beside, training, strict=True) if busy]
@@ -132,11 +166,26 @@ def main() -> None:
             ["measure (Intel, most uncertain first)", "p50 / p95 / max", "target"],
             [
                 *rows,
+                _link_row(links),
                 ["`vgm-studio demo` ready, fresh workspace", f"{cold:.1f} s", "≤ 10 s"],
                 ["`vgm-studio demo` ready, workspace kept", f"{warm:.1f} s", ""],
             ],
         )
     )
+
+
+def _link_row(seconds: list[float]) -> list[str]:
+    return [
+        f"deep link `?edge=ID` → that edge shown ({len(seconds)} links)",
+        f"{statistics.median(seconds):.2f} / {_percentile(seconds, 0.95):.2f} / "
+        f"{max(seconds):.2f} s",
+        "≤ 2 s",
+    ]
+
+
+def _print_links(seconds: list[float]) -> None:
+    print(f"machine: {machine()}")
+    print(table(["measure (Intel)", "p50 / p95 / max", "target"], [_link_row(seconds)]))
 
 
 if __name__ == "__main__":

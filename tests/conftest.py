@@ -10,6 +10,36 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 
 
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        "--full",
+        action="store_true",
+        help="also run the long end-to-end tests (marked long); .ci/run always does",
+    )
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Under pytest-xdist each worker's torch uses one thread: two workers with two threads
+    each on two cores make torch's threads wait on each other (a training test 3× slower).
+    The commands tests start in subprocesses keep the machine's own setting."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        import torch
+
+        torch.set_num_threads(1)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Without ``--full``, the tests marked ``long`` (whole runs on real logs, a trained model,
+    a fleet) are skipped, so that ``pytest`` is a loop of a few minutes; each skip says how to
+    run it."""
+    if config.getoption("--full"):
+        return
+    skip = pytest.mark.skip(reason="a long end-to-end test: pytest --full runs it (CI does)")
+    for item in items:
+        if "long" in item.keywords:
+            item.add_marker(skip)
+
+
 def _datasets_dir() -> Path:
     env = os.environ.get("VGM_STUDIO_DATASETS")
     return Path(env) if env else REPO.parent / "shared" / "datasets"

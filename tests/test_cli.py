@@ -29,6 +29,7 @@ def one_line_error(proc: subprocess.CompletedProcess[str]) -> str:
     return lines[0]
 
 
+@pytest.mark.long
 def test_info_reads_every_shared_log(datasets):
     logs = [p for p in sorted(datasets.rglob("*")) if p.suffix in {".clf", ".log"}]
     for path in logs:
@@ -63,6 +64,7 @@ def test_info_errors_are_one_line(tmp_path):
     assert wrong.returncode == 2 and "--poses" in one_line_error(wrong)
 
 
+@pytest.mark.long
 def test_candidates_on_intel_give_both_labels_and_stable_ids(datasets, tmp_path, artifacts):
     log = datasets / "intel" / "intel.gfs.log"
     out1, out2 = tmp_path / "a.jsonl", tmp_path / "b.jsonl"

@@ -224,6 +224,7 @@ def _workflow_steps() -> dict[str, str]:
     return {"env": job["env"], **steps}  # type: ignore[dict-item]
 
 
+@pytest.mark.long
 @pytest.mark.skipif(shutil.which("vgm-studio") is None, reason="vgm-studio not on PATH")
 def test_the_ci_recipe_plays_through(runs, tmp_path):
     steps = _workflow_steps()

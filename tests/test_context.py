@@ -183,6 +183,7 @@ def test_labelled_edges_read_with_context_take_each_side_from_its_local_map(offi
     assert grew > len(plain.edges) // 2
 
 
+@pytest.mark.long
 def test_a_model_trained_with_context_keeps_it_and_reads_edges_with_it(
     balanced_office_edges, tmp_path
 ):
@@ -280,6 +281,7 @@ def test_slam_feeds_a_local_map_model_each_keyframe_with_its_neighbours(tmp_path
         EdgeValidator(config, keyed)
 
 
+@pytest.mark.long
 def test_slam_runs_with_a_local_map_model(tmp_path):
     model = _context_model(tmp_path)
     from vgm_studio.simulation.simulate import SimConfig, simulate

@@ -45,6 +45,9 @@ SETTINGS = FleetSettings(
 # Figures of a run that depend on the machine's speed, not on the run.
 TIMING = {"seconds", "stage_seconds", "settings"}
 
+# Each test starts Ray and runs several logs: minutes, so they wait for --full.
+pytestmark = pytest.mark.long
+
 
 def _relations(log_path: Path, out: Path) -> Path:
     """Freiburg relations from the simulator's TRUEPOS: pairs 5 and 30 scans apart."""

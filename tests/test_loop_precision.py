@@ -34,6 +34,7 @@ def _loops_kept(log: Path, model: Path, out: Path, *args: str) -> int:
     return json.loads(out.read_text())["loops_kept"]
 
 
+@pytest.mark.long
 def test_loop_precision_cut_applies_to_loops_and_the_higher_cut_wins(loop_log, tmp_path):
     # Precision 0.5 from p ≥ 0 on, 1.0 only from p ≥ 2: asking 0.9 keeps no loop at all,
     # asking 0.4 gives the cut 0, which leaves the checkpoint's own threshold alone.

@@ -254,6 +254,7 @@ def test_files_without_labels_are_refused(tmp_path):
         read_labelled([Path(path)], progress=False)
 
 
+@pytest.mark.long
 def test_train_and_eval_commands(sim_edges, tmp_path):
     import json
     import subprocess

@@ -1,5 +1,5 @@
 """The repository's own files: the licence pyproject names, and a .gitignore that keeps what
-README's examples write out of ``git status``."""
+the examples of README and the docs pages write out of ``git status``."""
 
 from __future__ import annotations
 
@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.doc_examples import WRITES, bash_text, doc_pages
+
 try:
     import tomllib
 except ModuleNotFoundError:  # Python 3.10
@@ -17,38 +19,18 @@ except ModuleNotFoundError:  # Python 3.10
 
 REPO = Path(__file__).resolve().parents[1]
 
-# Options whose value is a file or folder the command writes.
-WRITES = (
-    "--out",
-    "--map-png",
-    "--record",
-    "--json",
-    "--png",
-    "--workspace",
-    "--markdown",
-    "--g2o",
-    "--trajectory",
-    "--ros-map",
-    "--edges-out",
-    "--loops-out",
-)
-
-
-def _bash_blocks(text: str) -> str:
-    return "\n".join(re.findall(r"```bash\n(.*?)```", text, flags=re.DOTALL))
-
 
 def _written_paths() -> set[str]:
-    """What README's shell examples write, relative to the folder they run in."""
+    """What the shell examples of README and the docs pages write, relative to the folder
+    they run in."""
     found = set()
-    for option, value in re.findall(
-        r"(--[a-z-]+)[ =]([^\s-]\S*)", _bash_blocks(REPO.joinpath("README.md").read_text())
-    ):
-        if option not in WRITES or value.startswith(("..", "/", "$", "<")):
-            continue
-        if value.split("/")[0] in ("datasets", "assets"):  # the bundled files, tracked
-            continue
-        found.add(value)
+    for page in doc_pages():
+        for option, value in re.findall(r"(--[a-z0-9-]+)[ =]([^\s-]\S*)", bash_text(page)):
+            if option not in WRITES or value.startswith(("..", "/", "$", "<")):
+                continue
+            if value.split("/")[0] in ("datasets", "assets"):  # the bundled files, tracked
+                continue
+            found.add(value)
     return found
 
 
@@ -64,11 +46,14 @@ def test_the_licence_file_is_the_one_pyproject_names():
 @pytest.mark.skipif(
     shutil.which("git") is None or not REPO.joinpath(".git").exists(), reason="not a git checkout"
 )
-def test_what_readmes_examples_write_is_ignored():
+def test_what_the_docs_examples_write_is_ignored():
+    """Every file or folder an example of README or of the docs pages writes where it runs
+    (the repository root) is ignored by git, and so is what an interrupted training run
+    leaves beside its checkpoint."""
     written = _written_paths()
-    # The examples this test exists for: maps and a fleet's folder, and the state a
-    # stopped training run keeps beside its checkpoint.
-    assert {"maps", "fleet-out", "intel.jsonl", "intel.studio"} <= written
+    # The examples this test exists for: maps, a fleet's folder, a studio's workspace and an
+    # export's JSONL; and, below, what an interrupted training run leaves beside its checkpoint.
+    assert {"maps", "fleet-out", "intel.studio", "labels.jsonl"} <= written
     extra = ["mine.pt.partial", "models/sub/fhw-model.pt.partial", "labels.models/v1.pt"]
     paths = [*sorted(written), *(f"{p}/x" for p in sorted(written)), *extra]
     proc = subprocess.run(

@@ -79,6 +79,7 @@ def _not_json(name: str) -> None:
     raise AssertionError(f"{name} in the JSON document")
 
 
+@pytest.mark.long
 def test_validation_rejects_injected_loops_and_lowers_the_relation_error(runs):
     none, vgmnet, ref = runs["none"], runs["vgmnet"], runs["reference"]
     for doc in (none, vgmnet, ref):
@@ -101,6 +102,7 @@ def test_validation_rejects_injected_loops_and_lowers_the_relation_error(runs):
     assert ref["after"]["trans_mean"] < 0.05
 
 
+@pytest.mark.long
 def test_loops_out_holds_every_matched_loop_labelled_by_the_reference(office, runs):
     from vgm_studio.matching.edges import read_edges
     from vgm_studio.model.training import read_labelled
@@ -137,6 +139,7 @@ def test_loops_out_holds_every_matched_loop_labelled_by_the_reference(office, ru
     assert len(data.samples) == sum(e.label in ("success", "failure") for e in edges)
 
 
+@pytest.mark.long
 def test_maps_are_written_and_the_validated_one_is_the_sharper(runs):
     import cv2
 
@@ -153,6 +156,7 @@ def test_maps_are_written_and_the_validated_one_is_the_sharper(runs):
     assert known["after"] < 0.7 * known["before"]
 
 
+@pytest.mark.long
 def test_recording_reads_back_with_every_entity(runs):
     doc = runs["vgmnet"]
     store = rc.RrdReader(runs["_out"]["path"] / "run.rrd").stream().collect()
@@ -206,6 +210,7 @@ def test_recording_reads_back_with_every_entity(runs):
     assert "keyframe" in next(c for c in chunks if c.entity_path == "/world/scan").timeline_names
 
 
+@pytest.mark.long
 def test_the_final_sweep_can_be_switched_off(office, runs, tmp_path):
     """``--no-final-sweep`` reaches the front end: the run records it and no loop comes
     from the sweep."""

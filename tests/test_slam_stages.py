@@ -155,6 +155,7 @@ def test_a_simulated_log_scores_against_its_own_reference_without_a_relations_fi
     assert doc["after"]["trans_mean"] < doc["odometry"]["trans_mean"]
 
 
+@pytest.mark.long
 def test_a_corrected_log_scores_against_its_corrected_poses_however_it_is_read(datasets, tmp_path):
     log = datasets / "radish-corrected" / "belgioioso-corrected.log"
     docs = {}
@@ -174,6 +175,7 @@ def test_a_corrected_log_scores_against_its_corrected_poses_however_it_is_read(d
     assert docs["poses-odometry"]["odometry"]["trans_mean"] < docs["auto"]["odometry"]["trans_mean"]
 
 
+@pytest.mark.long
 def test_odometry_on_a_few_scans_is_not_used_and_not_warned_of(datasets, tmp_path, capsys):
     """Örebro's log holds raw odometry for 34 of its 237 scans: the run goes without it, says
     so, and does not warn that the scans disagree with odometry it never used (it once

@@ -119,6 +119,7 @@ def test_labels_survive_a_kill(office_edges, tmp_path):
             assert tab.edge_id() not in shown
 
 
+@pytest.mark.long
 def test_the_trainer_learns_from_labels_and_the_tab_shows_its_model(
     balanced_office_edges, tmp_path
 ):

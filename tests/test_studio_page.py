@@ -67,6 +67,7 @@ def _same_size(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> bo
     return abs(a[2] - b[2]) <= 0.05 * a[2] and abs(a[3] - b[3]) <= 0.05 * a[3]
 
 
+@pytest.mark.long
 def test_label_keys_do_not_move_the_camera_and_each_pair_is_framed(studio):
     with chromium() as browser:
         tab = StudioPage(browser.new_page(), studio.url)

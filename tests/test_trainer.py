@@ -84,6 +84,7 @@ def _copy(folder: Path, tmp_path: Path) -> Path:
     return target
 
 
+@pytest.mark.long
 def test_a_version_is_registered_promoted_and_changes_the_predictions(trained, edges):
     store = LabelStore(trained, create=False)
     [v1] = registry.list_models(store)
@@ -100,6 +101,7 @@ def test_a_version_is_registered_promoted_and_changes_the_predictions(trained, e
     assert status.metrics["accuracy"] == v1.metrics["accuracy"]
 
 
+@pytest.mark.long
 def test_a_worse_version_is_registered_but_not_promoted(trained, tmp_path):
     folder = _copy(trained, tmp_path)
     before = LabelStore(folder, create=False).predictions()
@@ -118,6 +120,7 @@ def test_a_worse_version_is_registered_but_not_promoted(trained, tmp_path):
     assert not registry.trainer_status(worker.store).pending_request
 
 
+@pytest.mark.long
 def test_models_lists_versions_and_exports_a_checkpoint_eval_accepts(trained, tmp_path, edges):
     app = typer.Typer()
     app.command()(trainer_cmds.models)
@@ -192,6 +195,7 @@ def _wait(condition, timeout: float, what: str):
     raise AssertionError(f"timed out waiting for {what}")
 
 
+@pytest.mark.long
 def test_a_killed_trainer_leaves_the_store_consistent_and_is_restarted(tmp_path, edges):
     folder = tmp_path / "ws"
     store = _workspace(folder, edges[:120])
@@ -231,6 +235,7 @@ def test_a_killed_trainer_leaves_the_store_consistent_and_is_restarted(tmp_path,
     assert "restarting" in supervisor.log_path.read_text()
 
 
+@pytest.mark.long
 def test_one_trainer_per_workspace_and_the_app_hears_of_promotions(trained, tmp_path):
     folder = _copy(trained, tmp_path)
     first = Worker(folder, TrainerConfig(nice=0), log=lambda _s: None)
@@ -261,6 +266,7 @@ def test_the_supervisor_never_raises_and_backs_off(tmp_path):
     assert Backoff().pause(1) == 1.0 and Backoff().pause(10) == 60.0
 
 
+@pytest.mark.long
 def test_a_trainer_that_fails_says_why(trained, tmp_path, monkeypatch):
     folder = _copy(trained, tmp_path)
     worker = Worker(folder, TrainerConfig(nice=0), log=lambda _s: None)
@@ -276,6 +282,7 @@ def test_a_trainer_that_fails_says_why(trained, tmp_path, monkeypatch):
     assert (status.state, status.message) == ("crashed", "RuntimeError: out of memory")
 
 
+@pytest.mark.long
 def test_a_version_judged_on_a_few_failures_is_not_promoted(tmp_path, edges):
     """Issue 16's case: 14 labels (2 success, 12 failure), 3 held-out failures, the bundled
     model's p(success) in use. v1 scored 3/3 there but called nearly every success a failure;
@@ -316,6 +323,7 @@ def _models_app() -> typer.Typer:
     return app
 
 
+@pytest.mark.long
 def test_the_guard_judges_a_model_in_use_that_reads_local_maps_on_local_maps(
     trained, tmp_path, balanced_office_edges
 ):
