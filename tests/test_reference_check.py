@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan, ScanLog
@@ -98,6 +99,7 @@ def test_only_a_rest_on_the_estimate_that_fits_far_better_contradicts():
     assert not contradicts_reference(estimate, turned, (0.2, 0.4), (0.6, 0.9))
 
 
+@pytest.mark.long
 def test_exact_references_along_featureless_corridors_stay_failures(tmp_path):
     """The simulated loop world's references are exact; along its corridors a slid match
     pairs up more points than the truth does, but it never contradicts the truth."""

@@ -103,6 +103,7 @@ def test_export_import_commands_round_trip(office_edges, tmp_path):
     assert "no workspace here" in line
 
 
+@pytest.mark.long
 @pytest.mark.slow
 def test_demo_prepares_its_workspace_with_predictions(tmp_path):
     proc = run("demo", "--workspace", tmp_path / "demo", "--no-serve")
@@ -116,6 +117,7 @@ def test_demo_prepares_its_workspace_with_predictions(tmp_path):
     assert again.returncode == 0 and "977 edges" in again.stdout
 
 
+@pytest.mark.long
 def test_ready_counts_from_the_process_start(tmp_path):
     """The studio's "ready N s after start" is the wait a user sees: the interpreter's
     start, the imports and the server's start included (it said 0.0 s on a prepared

@@ -35,6 +35,7 @@ def matched_pairs(count: int, seed: int) -> tuple[list[PairSample], np.ndarray]:
     return samples, np.array(labels)
 
 
+@pytest.mark.long
 def test_paper_network_takes_the_400_grid_and_learns_a_tiny_set():
     torch.manual_seed(0)
     net, hyper = build_network("vgmnet-paper", {})

@@ -86,6 +86,7 @@ def _wait(condition, timeout: float = 60.0) -> None:
         time.sleep(0.2)
 
 
+@pytest.mark.long
 def test_a_second_studio_uses_the_running_trainer_and_takes_over_when_it_ends(
     office_edges, tmp_path
 ):

@@ -79,6 +79,7 @@ def _loops(office, bad: int | None = None, p_bad: float = 1.0) -> list[SlamEdge]
     return [e for e in front.run(progress=False) if e.kind == "loop"]
 
 
+@pytest.mark.long
 def test_a_step_kept_under_the_loop_bar_does_not_split_a_revisit(office):
     truth = office[1]
     first = min(e.b for e in _loops(office) if e.kept)  # where the revisit begins
