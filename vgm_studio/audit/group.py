@@ -109,6 +109,7 @@ def check_loops(
         return {}
     links = chain(edges, covariances, poses, graph)
     grow = _Growth(links, len(poses), graph)
+    estimate, uncertainty = grow.estimate, grow.uncertainty
     loops = sorted(
         (i for i, e in enumerate(edges) if e.kind == "loop" and e.validated),
         key=lambda i: edges[i].b,
@@ -131,7 +132,6 @@ def check_loops(
             )
             for i in chosen
         ]
-        estimate, uncertainty = grow.estimate, grow.uncertainty
         flags = consistent(checked, estimate.poses, uncertainty, config, drift=uncertainty)
         closed = False
         for i, loop, ok in zip(chosen, checked, flags, strict=True):
@@ -143,9 +143,8 @@ def check_loops(
                 uncertainty.add(factor)
                 closed = True
         if closed:
-            grow.estimate.update(extra_iterations=2)
+            estimate.update(extra_iterations=2)
     grow.to(len(poses))
-    estimate, uncertainty = grow.estimate, grow.uncertainty
     gate = float(chi2.ppf(config.probability, 3))
     failed = [i for i, e in enumerate(edges) if e.kind == "loop" and not e.validated]
     # Support comes from the loops the group check kept and from the other failed loops: a

@@ -227,16 +227,22 @@ def _variances(cov: NDArray[np.float64]) -> tuple[float, float]:
     return float(cov[0, 0] + cov[1, 1]) / 2.0, float(cov[2, 2])
 
 
-def _mahalanobis(error: NDArray[np.float64], position_var: float, heading_var: float) -> float:
+def _mahalanobis(
+    error: NDArray[np.float64],
+    position_var: float | NDArray[np.float64],
+    heading_var: float | NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Squared Mahalanobis distance of (…, 3) errors, the position's variance isotropic."""
     e = np.asarray(error, dtype=np.float64)
-    return float((e[0] ** 2 + e[1] ** 2) / position_var + e[2] ** 2 / heading_var)
+    position = (e[..., 0] ** 2 + e[..., 1] ** 2) / position_var
+    return np.asarray(position + e[..., 2] ** 2 / heading_var)
 
 
 def _fits_estimate(loop: Loop, poses: NDArray[np.float64], rel: Relative) -> float:
     """Squared Mahalanobis distance of the loop from the estimate's a→b."""
     vt, vr = _variances(loop.covariance)
     error = se2.between(se2.between(poses[loop.a], poses[loop.b]), loop.measurement)
-    return _mahalanobis(error, vt + rel.position_var[loop.b], vr + rel.heading_var[loop.b])
+    return float(_mahalanobis(error, vt + rel.position_var[loop.b], vr + rel.heading_var[loop.b]))
 
 
 def cycle_chi2(one: Loop, two: Loop, poses: NDArray[np.float64], rel: dict[int, Relative]) -> float:
@@ -268,4 +274,4 @@ def cycle_chi2s(
     ra, rb = rel[one.a], rel[one.b]
     position = vt1 + vt2 + vr1 * lever + rb.position_var[b2] + ra.position_var[a2]
     heading = vr1 + vr2 + rb.heading_var[b2] + ra.heading_var[a2]
-    return np.asarray((error[:, 0] ** 2 + error[:, 1] ** 2) / position + error[:, 2] ** 2 / heading)
+    return _mahalanobis(error, position, heading)
