@@ -41,24 +41,12 @@ WRITES = (
     "--edges-out",
     "--loops-out",
 )
-# Commands that serve until Ctrl-C or need a Ray cluster: their examples are parsed, never run.
-NEVER_RUN = frozenset({"demo", "label", "trainer", "fleet"})
-# Options that name a server (a PostgreSQL store, a Ray head) the tests do not have.
-NEEDS_A_SERVER = frozenset({"--store", "--ray-address"})
-# What the repository bundles, and examples may read as they are.
-BUNDLED = ("datasets", "assets")
-# One example may take this long; the demo log's slowest takes about 20 s on two cores.
-TIMEOUT_S = 300
 
 SHELLS = frozenset({"bash", "sh", "shell", "console"})
 FENCE = re.compile(r"^(?P<indent>\s*)(?P<fence>`{3,}|~{3,})\s*(?P<lang>[\w+-]*)")
 SUBSTITUTION = re.compile(r"\$\(([^()]*)\)")
 SHELL_WORDS = frozenset({"if", "then", "else", "elif", "do", "while", "until", "!", "time"})
 ASSIGNMENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*=")
-FILE_NAME = re.compile(r"\.[A-Za-z][A-Za-z0-9]*$")
-# A page's sample output that shows a rule failing: the command before it exits 1.
-RULE_FAILS = re.compile(r"\bFAILS\b")
-WORK_NUMBER = re.compile(r"\bsessions?\s*\d", re.IGNORECASE)
 
 
 # --- the pages and their examples --------------------------------------------------------

@@ -18,6 +18,7 @@ import functools
 import hashlib
 import os
 import posixpath
+import re
 import shutil
 import subprocess
 import sys
@@ -30,16 +31,9 @@ from pathlib import Path
 import pytest
 
 from tests.doc_examples import (
-    BUNDLED,
     CLI,
-    FILE_NAME,
-    NEEDS_A_SERVER,
-    NEVER_RUN,
     REPO,
-    RULE_FAILS,
     SHELLS,
-    TIMEOUT_S,
-    WORK_NUMBER,
     WRITES,
     Block,
     Example,
@@ -49,6 +43,20 @@ from tests.doc_examples import (
     fenced_blocks,
     parse_call,
 )
+
+# Commands that serve until Ctrl-C or need a Ray cluster: their examples are parsed, never run.
+NEVER_RUN = frozenset({"demo", "label", "trainer", "fleet"})
+# Options that name a server (a PostgreSQL store, a Ray head) the tests do not have.
+NEEDS_A_SERVER = frozenset({"--store", "--ray-address"})
+# What the repository bundles, and examples may read as they are.
+BUNDLED = ("datasets", "assets")
+# One example may take this long; the demo log's slowest takes about 20 s on two cores.
+TIMEOUT_S = 300
+FILE_NAME = re.compile(r"\.[A-Za-z][A-Za-z0-9]*$")
+# A page's sample output that shows a rule failing: the command before it exits 1.
+RULE_FAILS = re.compile(r"\bFAILS\b")
+WORK_NUMBER = re.compile(r"\bsessions?\s*\d", re.IGNORECASE)
+
 
 # --- the commands of every page, checked ---------------------------------------------------
 
