@@ -20,8 +20,9 @@ def wrap_angle(theta: ArrayLike) -> NDArray[np.float64]:
     return np.pi - np.mod(np.pi - t, 2.0 * np.pi)
 
 
-def _wrap(theta: float) -> float:
-    """``wrap_angle`` of one float (Python's % is numpy's mod)."""
+def wrap(theta: float) -> float:
+    """``wrap_angle`` of one float, without numpy's per-call cost (Python's % is numpy's
+    mod)."""
     return math.pi - (math.pi - theta) % (2.0 * math.pi)
 
 
@@ -35,7 +36,7 @@ def compose(a: ArrayLike, b: ArrayLike) -> Pose:
         ax, ay, at = a.tolist()
         bx, by, bt = b.tolist()
         c, s = math.cos(at), math.sin(at)
-        return np.array([ax + c * bx - s * by, ay + s * bx + c * by, _wrap(at + bt)])
+        return np.array([ax + c * bx - s * by, ay + s * bx + c * by, wrap(at + bt)])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
     y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
@@ -48,7 +49,7 @@ def inverse(a: ArrayLike) -> Pose:
     if a.shape == (3,) and math.isfinite(a[2]):
         x, y, t = a.tolist()
         c, s = math.cos(t), math.sin(t)
-        return np.array([-c * x - s * y, s * x - c * y, _wrap(-t)])
+        return np.array([-c * x - s * y, s * x - c * y, wrap(-t)])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = -c * a[..., 0] - s * a[..., 1]
     y = s * a[..., 0] - c * a[..., 1]
@@ -62,11 +63,11 @@ def between(a: ArrayLike, b: ArrayLike) -> Pose:
 
 def transform_points(pose: ArrayLike, points: ArrayLike) -> NDArray[np.float64]:
     """Moves (N, 2) points by ``pose``: p' = R(θ)·p + t."""
-    pose = np.asarray(pose, dtype=np.float64)
+    x, y, t = np.asarray(pose, dtype=np.float64).tolist()
     pts = np.asarray(points, dtype=np.float64)
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    rot = np.array([[c, -s], [s, c]])
-    moved: NDArray[np.float64] = pts @ rot.T + pose[:2]
+    # Local maps and views move tens of thousands of small clouds: floats, not 0-d arrays.
+    c, s = math.cos(t), math.sin(t)
+    moved: NDArray[np.float64] = pts @ np.array([[c, s], [-s, c]]) + np.array([x, y])
     return moved
 
 

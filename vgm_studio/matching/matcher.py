@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, fields
 from functools import cached_property
 from typing import Any
 
@@ -54,7 +54,8 @@ class MatchResult:
 
     def figures(self) -> dict[str, Any]:
         """The quality figures as JSON-ready values."""
-        d = asdict(self)
+        # Field by field: ``asdict`` deep-copies every array, once per validated edge.
+        d = {f.name: getattr(self, f.name) for f in fields(self)}
         d.pop("estimate")
         for key in ("covariance", "kiss_estimate"):
             if d[key] is not None:

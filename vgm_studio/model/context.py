@@ -114,7 +114,7 @@ def walk(poses: Poses, centre: int, context: Context) -> list[int]:
             if path > context.reach:
                 break
             moved = math.hypot(pose[0] - last[0], pose[1] - last[1])
-            turned = abs(float(se2.wrap_angle(pose[2] - last[2])))
+            turned = abs(se2.wrap(float(pose[2] - last[2])))
             if moved >= context.spacing or turned >= context.turn:
                 kept.append(j)
                 last = pose

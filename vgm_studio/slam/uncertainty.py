@@ -13,7 +13,6 @@ variance grows by Vθ·L²/3 (the sum over a straight chain of equal steps).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -90,34 +89,54 @@ class UncertaintyGraph:
         vt, vr, ln = vt0[keep], vr0[keep], np.array(self._len)[keep]
         graph = coo_matrix((weight, (a, b)), shape=(n, n)).tocsr()
         dist, pred = dijkstra(graph, directed=False, indices=sources, return_predecessors=True)
-        # Each edge's index + 1, both ways, so one lookup finds a tree edge's three values.
-        ids = np.arange(1, len(a) + 1, dtype=np.float64)
-        index = coo_matrix((np.r_[ids, ids], (np.r_[a, b], np.r_[b, a])), shape=(n, n)).tocsr()
-        values = np.vstack([np.zeros((1, 3)), np.column_stack([vt, vr, ln])])
-        return [_accumulate(d, p, index, values, count) for d, p in zip(dist, pred, strict=True)]
+        # A tree edge's row of ``values`` is found by its two ends' key among the sorted keys
+        # (row 0 is zeros: the source's and unreached nodes' own "edge").
+        keys = np.minimum(a, b) * n + np.maximum(a, b)
+        order = np.argsort(keys)
+        values = np.vstack([np.zeros((1, 3)), np.column_stack([vt, vr, ln])[order]])
+        edges = _EdgeKeys(keys[order], n)
+        return [_accumulate(d, p, edges, values, count) for d, p in zip(dist, pred, strict=True)]
+
+
+@dataclass(frozen=True)
+class _EdgeKeys:
+    """The kept edges' keys ``lo·n + hi``, sorted."""
+
+    sorted: NDArray[np.int64]
+    n: int
+
+    def rows(self, parent: NDArray[np.int64], nodes: NDArray[np.int64]) -> NDArray[np.int64]:
+        """Each (parent, node) edge's row of ``values``: its place among the keys + 1, 0
+        where parent is the node itself."""
+        keys = np.minimum(parent, nodes) * self.n + np.maximum(parent, nodes)
+        rows = np.searchsorted(self.sorted, keys) + 1
+        rows[parent == nodes] = 0
+        return rows
 
 
 def _accumulate(
     dist: NDArray[np.float64],
     pred: NDArray[np.int32],
-    index: Any,
+    edges: _EdgeKeys,
     values: NDArray[np.float64],
     count: int,
 ) -> Relative:
-    """Sums each edge's variances and length from the source down the shortest-path tree
-    (``index``: an edge's row of ``values``, by its two ends; row 0 is zeros)."""
+    """Sums each edge's variances and length from the source down the shortest-path tree."""
     n = len(dist)
     nodes = np.arange(n)
     reach = np.isfinite(dist)
     parent = np.where(reach & (pred >= 0), pred, nodes)
     # Each node's own edge to its parent, then pointer jumping: after k rounds every node holds
     # the sums over its 2^k nearest ancestors' edges, so log2(n) rounds sum whole paths.
-    acc = values[np.asarray(index[parent, nodes]).ravel().astype(np.int64)]
+    acc = values[edges.rows(parent, nodes)]
     jump = parent
     # The source (and an unreached node) points to itself and holds zero.
-    while not np.array_equal(jump, jump[jump]):
-        acc = acc + acc[jump]
-        jump = jump[jump]
+    while True:
+        further = jump[jump]
+        if np.array_equal(further, jump):
+            break
+        acc += acc[jump]
+        jump = further
     acc[~reach] = np.inf
     t, r, length = acc[:count, 0], acc[:count, 1], acc[:count, 2]
     with np.errstate(invalid="ignore"):
