@@ -113,11 +113,22 @@ class ScanMatcher:
     def judge(self, a: Scan, b: Scan, pose: NDArray[np.float64]) -> Refinement | None:
         """How scan b at ``pose`` (not moved) agrees with scan a; None where either has too
         few points to say."""
+        return self.refine(a, b, pose, iterate=False)
+
+    def refine(
+        self, a: Scan, b: Scan, guess: NDArray[np.float64], iterate: bool = True
+    ) -> Refinement | None:
+        """Scan b refined onto scan a from ``guess``, point to line without kiss-icp first (a
+        guess already within centimetres); None where either has too few points."""
         pa, pb = self._prepare(a), self._prepare(b)
         if pa.target is None or len(pb.points) < 3:
             return None
-        pose = np.asarray(pose, dtype=np.float64)
-        return refine_with(pa.target, pb.points, pose, self.config, iterate=False)
+        pose = np.asarray(guess, dtype=np.float64)
+        return refine_with(pa.target, pb.points, pose, self.config, iterate=iterate)
+
+    def target(self, scan: Scan) -> Target | None:
+        """The scan's points and normals as a refinement onto it reads them, built once."""
+        return self._prepare(scan).target
 
     def match(self, a: Scan, b: Scan, guess: NDArray[np.float64]) -> MatchResult:
         """Estimates the pose of scan b in the frame of scan a, starting from ``guess``."""

@@ -15,6 +15,7 @@ from vgm_studio.errors import InputError
 from vgm_studio.graph.pose_graph import GraphEdge, OptimizeResult, optimize
 from vgm_studio.matching.candidates import select_keyframes
 from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.slam.between import BetweenPlacements, place_between
 from vgm_studio.slam.config import SlamConfig
 from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.factors import fallback_edge, graph_edge
@@ -52,6 +53,8 @@ class SlamResult:
         loop_bar: The p(success) a loop was held to (``EdgeValidator.loop_bar``: the highest
             of the model's threshold, the loop threshold and the precision cut); None where
             the validator gives no p or the run did not record it.
+        between: The scans between keyframes refined onto the keyframes around them
+            (``slam.between``); None where the run placed them by odometry alone.
     """
 
     keyframes: NDArray[np.int64]
@@ -66,14 +69,24 @@ class SlamResult:
     after_edges: list[GraphEdge] = field(default_factory=list)
     given: NDArray[np.float64] | None = None
     loop_bar: float | None = None
+    between: BetweenPlacements | None = None
 
     @property
     def odometry_keyframes(self) -> NDArray[np.float64]:
         return self.odometry[self.keyframes]
 
-    def scan_poses(self, keyframe_poses: NDArray[np.float64]) -> NDArray[np.float64]:
-        """(N, 3) poses of every scan, carried from the keyframes by the odometry."""
-        return scan_poses(keyframe_poses, self.keyframes, self.odometry)
+    def scan_poses(
+        self, keyframe_poses: NDArray[np.float64], refined: bool = True
+    ) -> NDArray[np.float64]:
+        """(N, 3) poses of every scan, carried by the odometry from the keyframes and, where
+        ``refined``, the anchors between them placed by their refinements (``between``)."""
+        if not refined or self.between is None:
+            return scan_poses(keyframe_poses, self.keyframes, self.odometry)
+        anchors, placed = self.between.place(keyframe_poses)
+        known = np.concatenate([self.keyframes, anchors])
+        order = np.argsort(known, kind="stable")
+        poses = np.concatenate([keyframe_poses, placed])[order]
+        return scan_poses(poses, known[order], self.odometry)
 
     @property
     def edges_kept(self) -> int:
@@ -209,6 +222,9 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
             after_edges.append(fallback_edge(e, odo_kf, config.graph, config.front_end))
     after = optimize(running, after_edges, config.graph)
     seconds["back_end"] = time.perf_counter() - t
+    t = time.perf_counter()
+    between = place_between(log.scans, odometry, keyframes, progress)
+    seconds["between"] = time.perf_counter() - t
     return SlamResult(
         keyframes=keyframes.astype(np.int64),
         odometry=odometry,
@@ -221,4 +237,5 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
         isam2_restarts=front.estimate.restarts,
         after_edges=after_edges,
         loop_bar=validator.loop_bar,
+        between=between,
     )

@@ -113,9 +113,11 @@ class EdgeCounts:
 def errors_of(
     result: SlamResult, relations: Sequence[MatchedRelation]
 ) -> dict[str, RelationErrors]:
-    """Relation errors of each trajectory, every scan placed by its keyframe and odometry."""
+    """Relation errors of each trajectory, every scan placed by its keyframes: the graphs'
+    with the scans between keyframes refined onto them, the odometry's (or an audited
+    graph's input) by the odometry alone."""
     return {
-        name: relation_errors(result.scan_poses(poses), relations)
+        name: relation_errors(result.scan_poses(poses, name in ("before", "after")), relations)
         for name, poses in keyframe_trajectories(result).items()
     }
 

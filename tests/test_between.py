@@ -1,0 +1,68 @@
+"""Scans between keyframes placed by refinements onto the keyframes around them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vgm_studio.core import se2
+from vgm_studio.datasets import open_log
+from vgm_studio.graph.metrics import relation_errors
+from vgm_studio.simulation.simulate import SimConfig, simulate
+from vgm_studio.slam.between import ANCHOR_DISTANCE, BetweenPlacements
+from vgm_studio.slam.config import SlamConfig, ValidationConfig
+from vgm_studio.slam.pipeline import run_slam
+from vgm_studio.slam.scoring import relations_from_reference
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("world")
+    log = open_log(simulate(SimConfig(preset="demo", seed=4, num_beams=181), Path(folder)))
+    config = SlamConfig(validation=ValidationConfig(validator="reference"))
+    return log, run_slam(log, config, progress=False)
+
+
+def test_refined_scans_between_keyframes_lie_nearer_the_truth_than_the_odometry_carries_them(
+    run,
+):
+    log, result = run
+    relations = relations_from_reference(log)
+    assert relations is not None
+    carried = relation_errors(result.scan_poses(result.after.poses, refined=False), relations)
+    refined = relation_errors(result.scan_poses(result.after.poses), relations)
+    assert refined.trans_mean < 0.9 * carried.trans_mean
+    assert refined.rot_mean_deg < carried.rot_mean_deg
+
+
+def test_anchors_lie_between_keyframes_a_step_of_odometry_apart_and_keyframes_stay(run):
+    _, result = run
+    between = result.between
+    assert between is not None and len(between.index) > 50
+    keyframes = set(result.keyframes.tolist())
+    assert not keyframes & set(between.index.tolist())
+    steps = np.diff(result.odometry[between.index, :2], axis=0)
+    assert np.median(np.hypot(steps[:, 0], steps[:, 1])) >= 0.9 * ANCHOR_DISTANCE
+    # Most anchors hold on both sides in a simulated world with walls in view.
+    held = np.isfinite(between.pose_before[:, 0]) & np.isfinite(between.pose_after[:, 0])
+    assert held.mean() > 0.8
+    poses = result.scan_poses(result.after.poses)
+    np.testing.assert_allclose(poses[result.keyframes], result.after.poses, atol=1e-12)
+
+
+def test_an_anchor_that_holds_on_one_side_is_placed_by_it_and_one_that_holds_on_none_is_not():
+    keyframes = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    nan = np.full(3, np.nan)
+    placements = BetweenPlacements(
+        index=np.array([3, 5, 7]),
+        before=np.array([0, 0, 0]),
+        pose_before=np.array([[0.2, 0.0, 0.0], nan, nan]),
+        pose_after=np.array([[-0.8, 0.0, 0.0], [-0.4, 0.1, 0.0], nan]),
+        share=np.array([0.2, 0.6, 0.8]),
+    )
+    index, poses = placements.place(keyframes)
+    assert index.tolist() == [3, 5]
+    np.testing.assert_allclose(poses[0], [0.2, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(poses[1], se2.compose(keyframes[1], [-0.4, 0.1, 0.0]))
