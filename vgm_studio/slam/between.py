@@ -15,13 +15,11 @@ validator and so the same graph (``BENCHMARKS.md``):
 |---|---|---|---|
 | none (odometry carry) | 0 | 0.0238 m, 0.459° | 0 s |
 | 0.3 m / 15° | 1,925 | 0.0220 m, 0.392° | 4 s |
-| 0.1 m / 5° (chosen; with ``MAX_MOVE``: 0.337°) | 5,207 | 0.0197 m, 0.332° | 11 s |
+| 0.1 m / 5° (chosen) | 5,207 | 0.0197 m, 0.332° | 11 s |
 | every scan | 12,135 | 0.0170 m, 0.266° | 33 s |
 
 The refinements are relative poses (a scan in a keyframe's frame), so any keyframe trajectory
-(``before`` and ``after``) places the scans by the same ones. Made in a spawned process beside
-the front end they cost as much time, since the front end keeps both of two cores busy
-(Intel: 78 s in all, against 80 s made after it).
+(``before`` and ``after``) places the scans by the same ones.
 """
 
 from __future__ import annotations
@@ -42,14 +40,8 @@ ANCHOR_DISTANCE = 0.1
 ANCHOR_ANGLE_DEG = 5.0
 
 # A refinement holds where it converged with at least this share of the scan's points on the
-# keyframe's walls (a local map's neighbour is held so too: ``model.context.Context``), and
-# moved the scan no farther than this from the odometry's step. Farther is a slide along a
-# corridor the walls do not pin, not a correction: in a featureless simulated corridor 10 %
-# of the refinements moved 0.17 m or more and the relation error rose from 0.081 to 0.096 m
-# (0.090 with the gate); on Intel the median moves 1.5 cm and the gate changes 0.0197 m not
-# at all.
+# keyframe's walls (a local map's neighbour is held so too: ``model.context.Context``).
 MIN_INLIERS = 0.5
-MAX_MOVE = 0.05
 
 
 @dataclass(frozen=True)
@@ -107,12 +99,10 @@ def place_between(
     share = np.where(has_after, (index - start) / np.maximum(end - start, 1), 0.0)
 
     def refined(k: int, i: int) -> NDArray[np.float64]:
-        guess = se2.between(odometry[k], odometry[i])
-        r = matcher.refine(scans[k], scans[i], guess)
+        r = matcher.refine(scans[k], scans[i], se2.between(odometry[k], odometry[i]))
         if r is None or not r.converged or r.inlier_ratio < MIN_INLIERS:
             return np.full(3, np.nan)
-        moved = se2.between(guess, r.estimate)
-        return r.estimate if np.hypot(moved[0], moved[1]) <= MAX_MOVE else np.full(3, np.nan)
+        return r.estimate
 
     pose_before = np.full((len(index), 3), np.nan)
     pose_after = np.full((len(index), 3), np.nan)
