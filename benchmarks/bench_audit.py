@@ -173,7 +173,9 @@ INTEL_HEADER = [
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", default="1,2,3", help="Injection seeds for killian.")
-    parser.add_argument("--graphs", default="killian,intel", help="killian, intel or both.")
+    parser.add_argument(
+        "--graphs", default="killian,intel", help="Comma-separated: killian, intel (default: both)."
+    )
     parser.add_argument("--intel-inject", type=int, default=50)
     args = parser.parse_args()
     graphs = set(args.graphs.split(","))
