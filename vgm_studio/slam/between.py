@@ -1,10 +1,10 @@
 """Scans between keyframes placed by the keyframes on either side of them.
 
 A map is scored by relations between scans at most a metre or two apart (Kümmerle et al.):
-of Intel's 2,984, 11 join two keyframes. So most of a run's relation error lies in where its
-scans between keyframes are, and carried there from a keyframe by the odometry
-(``pipeline.scan_poses``) they take the odometry's drift over the last metres. So every
-``ANCHOR_DISTANCE`` or ``ANCHOR_ANGLE_DEG`` of odometry a scan between keyframes (an anchor)
+of Intel's 2,984, 11 join two keyframes. Most of a run's relation error therefore lies in
+where its scans between keyframes are, and carried there from a keyframe by the odometry
+(``pipeline.scan_poses``) they take the odometry's drift over the last metres. Every
+``ANCHOR_DISTANCE`` or ``ANCHOR_ANGLE_DEG`` of odometry, a scan between keyframes (an anchor)
 is refined onto the keyframe before it and the one after (point to line, from the odometry's
 step, as a match's final centimetres are) and placed between the two by its share of the
 scans between them; the other scans are carried from the keyframes and anchors around them.
