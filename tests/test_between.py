@@ -11,9 +11,11 @@ from vgm_studio.core import se2
 from vgm_studio.datasets import open_log
 from vgm_studio.graph.metrics import relation_errors
 from vgm_studio.simulation.simulate import SimConfig, simulate
-from vgm_studio.slam.between import ANCHOR_DISTANCE, BetweenPlacements
+from vgm_studio.slam import between_stream
+from vgm_studio.slam.between import ANCHOR_DISTANCE, BetweenPlacements, place_between
+from vgm_studio.slam.between_stream import BetweenStream
 from vgm_studio.slam.config import SlamConfig, ValidationConfig
-from vgm_studio.slam.pipeline import run_slam
+from vgm_studio.slam.pipeline import MIN_POINTS, run_slam
 from vgm_studio.slam.scoring import relations_from_reference
 
 
@@ -66,3 +68,44 @@ def test_an_anchor_that_holds_on_one_side_is_placed_by_it_and_one_that_holds_on_
     assert index.tolist() == [3, 5]
     np.testing.assert_allclose(poses[0], [0.2, 0.0, 0.0], atol=1e-12)
     np.testing.assert_allclose(poses[1], se2.compose(keyframes[1], [-0.4, 0.1, 0.0]))
+
+
+def _stream(log, result) -> BetweenStream:
+    fe = SlamConfig().front_end
+    usable = np.array([len(s.points()) >= MIN_POINTS for s in log.scans])
+    stream = BetweenStream(log.scans, usable, (fe.keyframe_distance, fe.keyframe_angle_deg))
+    for i, pose in enumerate(result.odometry):
+        stream.pose(i, pose)
+    return stream
+
+
+def test_anchors_refined_while_the_odometry_runs_are_those_refined_after_it(run, monkeypatch):
+    log, result = run
+    here = place_between(log.scans, result.odometry, result.keyframes, progress=False)
+
+    def refused(*args, **kwargs):
+        raise AssertionError("the worker's placements were not used")
+
+    monkeypatch.setattr(between_stream, "place_between", refused)
+    there = _stream(log, result).result(result.odometry, result.keyframes, progress=False)
+    np.testing.assert_array_equal(there.index, here.index)
+    np.testing.assert_array_equal(there.before, here.before)
+    np.testing.assert_array_equal(there.pose_before, here.pose_before)
+    np.testing.assert_array_equal(there.pose_after, here.pose_after)
+    np.testing.assert_array_equal(there.share, here.share)
+
+
+def test_keyframes_the_worker_did_not_pick_are_placed_after_the_odometry(run, monkeypatch):
+    log, result = run
+    made = []
+    real = between_stream.place_between
+
+    def counted(*args, **kwargs):
+        made.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(between_stream, "place_between", counted)
+    other = result.keyframes[::2]
+    placed = _stream(log, result).result(result.odometry, other, progress=False)
+    assert made == [1]
+    assert not set(placed.index.tolist()) & set(other.tolist())

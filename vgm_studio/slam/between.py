@@ -93,7 +93,7 @@ def place_between(
 ) -> BetweenPlacements:
     """Refines the anchors between keyframes onto the keyframe before and the one after
     each, from the odometry's step (see the module's docstring)."""
-    matcher = ScanMatcher()
+    refine = Refiner(scans, odometry)
     picked = select_keyframes(odometry, ANCHOR_DISTANCE, ANCHOR_ANGLE_DEG)
     index = np.setdiff1d(picked[picked > keyframes[0]], keyframes).astype(np.int64)
     before = np.searchsorted(keyframes, index, side="right") - 1
@@ -101,20 +101,33 @@ def place_between(
     has_after = keyframes[after] > index
     start, end = keyframes[before], np.where(has_after, keyframes[after], index)
     share = np.where(has_after, (index - start) / np.maximum(end - start, 1), 0.0)
-
-    def refined(k: int, i: int) -> NDArray[np.float64]:
-        r = matcher.refine(scans[k], scans[i], se2.between(odometry[k], odometry[i]))
-        if r is None or not r.converged or r.inlier_ratio < MIN_INLIERS:
-            return np.full(3, np.nan)
-        return r.estimate
-
     pose_before = np.full((len(index), 3), np.nan)
     pose_after = np.full((len(index), 3), np.nan)
     rows = track(range(len(index)), "placing scans between keyframes", "scan", enabled=progress)
     for m in rows:
         i = int(index[m])
-        pose_before[m] = refined(int(keyframes[before[m]]), i)
+        pose_before[m] = refine(int(keyframes[before[m]]), i)
         if has_after[m]:
-            pose_after[m] = refined(int(keyframes[after[m]]), i)
-        matcher.forget(scans[i])  # an anchor is refined here alone
+            pose_after[m] = refine(int(keyframes[after[m]]), i)
+        refine.done(i)
     return BetweenPlacements(index, before.astype(np.int64), pose_before, pose_after, share)
+
+
+class Refiner:
+    """An anchor refined onto a keyframe from the odometry's step; NaN where it does not hold."""
+
+    def __init__(self, scans: Sequence[Scan], odometry: NDArray[np.float64]) -> None:
+        self.scans, self.odometry = scans, odometry
+        self._matcher = ScanMatcher()
+
+    def __call__(self, k: int, i: int) -> NDArray[np.float64]:
+        guess = se2.between(self.odometry[k], self.odometry[i])
+        r = self._matcher.refine(self.scans[k], self.scans[i], guess)
+        if r is None or not r.converged or r.inlier_ratio < MIN_INLIERS:
+            return np.full(3, np.nan)
+        return r.estimate
+
+    def done(self, i: int) -> None:
+        """Scan ``i`` is refined no more: its cached points go (an anchor is refined here
+        alone)."""
+        self._matcher.forget(self.scans[i])

@@ -112,6 +112,7 @@ def scan_odometry(
     progress: bool = True,
     recovery: Recovery | None = None,
     judge: Judge | None = None,
+    on_pose: Callable[[int, NDArray[np.float64]], None] | None = None,
 ) -> NDArray[np.float64]:
     """kiss-icp odometry over scans in order, predicted by the scans' own odometry if any.
 
@@ -121,6 +122,7 @@ def scan_odometry(
         progress: Show a progress bar.
         recovery: How a wheel-less step is searched again.
         judge: Chooses among a wheel-less step's candidates; None: the best score.
+        on_pose: Told each scan's pose as soon as it is final (index, pose).
 
     Returns:
         (N, 3) sensor poses (x, y, θ) relative to the first scan.
@@ -147,6 +149,8 @@ def scan_odometry(
             # Nothing to register: carry the prediction.
             pipeline.last_pose = pipeline.last_pose @ pipeline.last_delta
         poses[i] = se2.from_matrix(pipeline.last_pose)
+        if on_pose is not None:
+            on_pose(i, poses[i])
     return poses
 
 

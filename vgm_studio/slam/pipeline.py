@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import multiprocessing
 import time
 from dataclasses import dataclass, field
 
@@ -16,7 +17,8 @@ from vgm_studio.graph.pose_graph import GraphEdge, OptimizeResult, optimize
 from vgm_studio.matching.candidates import select_keyframes
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.slam.between import BetweenPlacements, place_between
-from vgm_studio.slam.config import SlamConfig
+from vgm_studio.slam.between_stream import BetweenStream
+from vgm_studio.slam.config import FrontEndConfig, SlamConfig
 from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.factors import fallback_edge, graph_edge
 from vgm_studio.slam.frontend import FrontEnd
@@ -158,6 +160,19 @@ def _usable(log: ScanLog) -> NDArray[np.bool_]:
     return np.array([len(s.points()) >= MIN_POINTS for s in log.scans])
 
 
+def _between_stream(
+    log: ScanLog, usable: NDArray[np.bool_], fe: FrontEndConfig
+) -> BetweenStream | None:
+    """The worker that refines the anchors while the odometry runs, where the run may use a
+    second core (not a one-CPU Ray task, nor a process pool's daemonic worker)."""
+    if fe.match_threads() < 2 or multiprocessing.current_process().daemon:
+        return None
+    try:
+        return BetweenStream(log.scans, usable, (fe.keyframe_distance, fe.keyframe_angle_deg))
+    except OSError:  # no processes here (no /dev/shm, a sandbox)
+        return None
+
+
 def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamResult:
     """Runs the whole pipeline on a log.
 
@@ -173,10 +188,13 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
             "SLAM needs two or more",
         )
     check_loop_precision(config.validation)
-    t = time.perf_counter()
-    odometry = scan_odometry(log.scans, progress=progress, judge=pair_judge(config.validation))
-    seconds["odometry"] = time.perf_counter() - t
     fe = config.front_end
+    stream = _between_stream(log, usable, fe)
+    t = time.perf_counter()
+    judge = pair_judge(config.validation)
+    on_pose = stream.pose if stream is not None else None
+    odometry = scan_odometry(log.scans, progress=progress, judge=judge, on_pose=on_pose)
+    seconds["odometry"] = time.perf_counter() - t
     if config.validation.validator == "none":
         # ``none`` keeps every edge: no sequential match goes out for disagreeing with the
         # odometry either, so ``before`` and ``after`` stay one graph.
@@ -223,7 +241,10 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
     after = optimize(running, after_edges, config.graph)
     seconds["back_end"] = time.perf_counter() - t
     t = time.perf_counter()
-    between = place_between(log.scans, odometry, keyframes, progress)
+    if stream is not None:
+        between = stream.result(odometry, keyframes, progress)
+    else:
+        between = place_between(log.scans, odometry, keyframes, progress)
     seconds["between"] = time.perf_counter() - t
     return SlamResult(
         keyframes=keyframes.astype(np.int64),

@@ -29,6 +29,9 @@ from vgm_studio.model.context import Context, LocalMapper, Placements, walk
 # round trips cost little.
 CHUNK = 64
 
+# Not fork: the parent runs threads (kiss-icp's, torch's) whose locks a fork would copy held.
+SPAWN = multiprocessing.get_context("spawn")
+
 _mapper: LocalMapper | None = None  # the worker process's own
 
 
@@ -37,7 +40,12 @@ def _start(
 ) -> None:
     global _mapper
     _mapper = LocalMapper(scans, poses, context, ScanMatcher(config))
-    # A parent killed outright (kill -9) closes no pipe the worker waits on: it would wait on.
+    exit_with_parent()
+
+
+def exit_with_parent() -> None:
+    """Ends this worker process when its parent is gone: a parent killed outright (kill -9)
+    closes no pipe the worker waits on, and it would wait on."""
     parent = os.getppid()
 
     def watch() -> None:
@@ -74,9 +82,7 @@ class PlacingAhead:
         try:
             self._pool = ProcessPoolExecutor(
                 1,
-                # Not fork: the parent runs threads (kiss-icp's, torch's) whose locks a fork
-                # would copy held.
-                mp_context=multiprocessing.get_context("spawn"),
+                mp_context=SPAWN,
                 initializer=_start,
                 initargs=(
                     mapper.scans,
