@@ -17,7 +17,7 @@ from vgm_studio.graph.pose_graph import GraphEdge, OptimizeResult, optimize
 from vgm_studio.matching.candidates import select_keyframes
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.slam.between import BetweenPlacements, place_between
-from vgm_studio.slam.between_stream import BetweenStream
+from vgm_studio.slam.between_stream import STREAM_FROM, BetweenStream
 from vgm_studio.slam.config import FrontEndConfig, SlamConfig
 from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.factors import fallback_edge, graph_edge
@@ -164,12 +164,15 @@ def _between_stream(
     log: ScanLog, usable: NDArray[np.bool_], fe: FrontEndConfig
 ) -> BetweenStream | None:
     """The worker that refines the anchors while the odometry runs, where the run may use a
-    second core (not a one-CPU Ray task, nor a process pool's daemonic worker)."""
-    if fe.match_threads() < 2 or multiprocessing.current_process().daemon:
+    second core (not a one-CPU Ray task, nor a process pool's daemonic worker) and the log is
+    long enough to repay the worker's start."""
+    if len(log) < STREAM_FROM or fe.match_threads() < 2:
+        return None
+    if multiprocessing.current_process().daemon:
         return None
     try:
         return BetweenStream(log.scans, usable, (fe.keyframe_distance, fe.keyframe_angle_deg))
-    except OSError:  # no processes here (no /dev/shm, a sandbox)
+    except (OSError, RuntimeError):  # no processes here (no /dev/shm, a sandbox)
         return None
 
 

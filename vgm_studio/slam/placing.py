@@ -29,9 +29,6 @@ from vgm_studio.model.context import Context, LocalMapper, Placements, walk
 # round trips cost little.
 CHUNK = 64
 
-# Not fork: the parent runs threads (kiss-icp's, torch's) whose locks a fork would copy held.
-SPAWN = multiprocessing.get_context("spawn")
-
 _mapper: LocalMapper | None = None  # the worker process's own
 
 
@@ -41,6 +38,16 @@ def _start(
     global _mapper
     _mapper = LocalMapper(scans, poses, context, ScanMatcher(config))
     exit_with_parent()
+
+
+def spawn() -> multiprocessing.context.SpawnContext:
+    """How worker processes start. Not fork: the parent runs threads (kiss-icp's, torch's)
+    whose locks a fork would copy held.
+
+    Raises:
+        OSError, RuntimeError: No processes here.
+    """
+    return multiprocessing.get_context("spawn")
 
 
 def exit_with_parent() -> None:
@@ -82,7 +89,7 @@ class PlacingAhead:
         try:
             self._pool = ProcessPoolExecutor(
                 1,
-                mp_context=SPAWN,
+                mp_context=spawn(),
                 initializer=_start,
                 initargs=(
                     mapper.scans,
