@@ -126,10 +126,6 @@ class ScanMatcher:
         pose = np.asarray(guess, dtype=np.float64)
         return refine_with(pa.target, pb.points, pose, self.config, iterate=iterate)
 
-    def target(self, scan: Scan) -> Target | None:
-        """The scan's points and normals as a refinement onto it reads them, built once."""
-        return self._prepare(scan).target
-
     def match(self, a: Scan, b: Scan, guess: NDArray[np.float64]) -> MatchResult:
         """Estimates the pose of scan b in the frame of scan a, starting from ``guess``."""
         pa, pb = self._prepare(a), self._prepare(b)
