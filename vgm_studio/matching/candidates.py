@@ -75,16 +75,28 @@ def select_keyframes(
     poses: NDArray[np.float64], distance: float, angle_deg: float
 ) -> NDArray[np.int64]:
     """Indices of keyframes: the first pose, then each pose that moved past either threshold."""
-    if distance <= 0 and angle_deg <= 0:
-        return np.arange(len(poses))
-    keep = [0]
-    angle = math.radians(angle_deg) if angle_deg > 0 else math.inf
-    distance = distance if distance > 0 else math.inf
-    for i in range(1, len(poses)):
-        d = se2.between(poses[keep[-1]], poses[i])
-        if math.hypot(d[0], d[1]) >= distance or abs(d[2]) >= angle:
-            keep.append(i)
-    return np.asarray(keep, dtype=np.int64)
+    pick = KeyframePicker(distance, angle_deg)
+    return np.asarray([i for i, pose in enumerate(poses) if pick(pose)], dtype=np.int64)
+
+
+class KeyframePicker:
+    """``select_keyframes`` a pose at a time, for poses that arrive one by one: called with
+    each next pose, it says whether that pose is a keyframe. A threshold not above 0 never
+    fires; with both so, every pose is a keyframe."""
+
+    def __init__(self, distance: float, angle_deg: float) -> None:
+        self._every = distance <= 0 and angle_deg <= 0
+        self._distance = distance if distance > 0 else math.inf
+        self._angle = math.radians(angle_deg) if angle_deg > 0 else math.inf
+        self._last: NDArray[np.float64] | None = None
+
+    def __call__(self, pose: NDArray[np.float64]) -> bool:
+        if not self._every and self._last is not None:
+            d = se2.between(self._last, pose)
+            if math.hypot(d[0], d[1]) < self._distance and abs(d[2]) < self._angle:
+                return False
+        self._last = pose
+        return True
 
 
 def loop_pairs(

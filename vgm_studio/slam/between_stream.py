@@ -2,8 +2,8 @@
 
 The odometry is one thread of kiss-icp, so the second core is idle while it runs, and an
 anchor's refinement needs only the odometry up to the next keyframe. The worker is told each
-scan's pose as it is made, picks the keyframes and anchors as the run will (the first
-usable scan, then one past either threshold), and refines each anchor as soon as both of its
+scan's pose as it is made, picks the keyframes and anchors as the run will (``KeyframePicker``,
+as ``select_keyframes`` does), and refines each anchor as soon as both of its
 keyframes are known. At the end the run hands it its keyframes: where they differ from the
 worker's, or the worker failed, the placements are made afterwards (``place_between``), so
 the result is ``place_between``'s either way.
@@ -12,7 +12,6 @@ the result is ``place_between``'s either way.
 from __future__ import annotations
 
 import contextlib
-import math
 import queue
 import weakref
 from collections.abc import Sequence
@@ -21,8 +20,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
+from vgm_studio.matching.candidates import KeyframePicker
 from vgm_studio.slam.between import (
     ANCHOR_ANGLE_DEG,
     ANCHOR_DISTANCE,
@@ -85,12 +84,11 @@ class BetweenStream:
         try:
             self._flush()
             self._to.put(("done", np.asarray(keyframes)))
-            while found is None and self._proc.is_alive():
-                try:
+            # Waits while the worker lives: one that died sends nothing.
+            while self._proc.is_alive():
+                with contextlib.suppress(queue.Empty):
                     found = self._back.get(timeout=1.0)
-                except queue.Empty:
-                    continue
-                break
+                    break
         except (OSError, ValueError):
             found = None
         finally:
@@ -114,19 +112,6 @@ def _stop(proc: Any, to: Any) -> None:
         proc.terminate()
 
 
-def _moved(a: NDArray[np.float64], b: NDArray[np.float64], distance: float, angle: float) -> bool:
-    d = se2.between(a, b)
-    return math.hypot(d[0], d[1]) >= distance or abs(d[2]) >= angle
-
-
-def _limits(distance: float, angle_deg: float) -> tuple[float, float]:
-    """``select_keyframes``'s thresholds: one not above 0 never fires."""
-    return (
-        distance if distance > 0 else math.inf,
-        math.radians(angle_deg) if angle_deg > 0 else math.inf,
-    )
-
-
 def _work(
     scans: list[Scan],
     usable: NDArray[np.bool_],
@@ -137,10 +122,10 @@ def _work(
     exit_with_parent()
     odometry = np.full((len(scans), 3), np.nan)
     refine = Refiner(scans, odometry)
-    key_limits = _limits(*keyframe_step)
-    anchor_limits = _limits(ANCHOR_DISTANCE, ANCHOR_ANGLE_DEG)
+    # The run picks keyframes among the usable scans and anchors among all (``place_between``).
+    pick_key = KeyframePicker(*keyframe_step)
+    pick_anchor = KeyframePicker(ANCHOR_DISTANCE, ANCHOR_ANGLE_DEG)
     keyframes: list[int] = []
-    picked_last: int | None = None
     index: list[int] = []
     before: list[int] = []
     pose_before: list[NDArray[np.float64]] = []
@@ -157,12 +142,8 @@ def _work(
         for j, pose in enumerate(poses):
             i = start + j
             odometry[i] = pose
-            key = bool(usable[i]) and (
-                not keyframes or _moved(odometry[keyframes[-1]], pose, *key_limits)
-            )
-            picked = picked_last is None or _moved(odometry[picked_last], pose, *anchor_limits)
-            if picked:
-                picked_last = i
+            key = bool(usable[i]) and pick_key(pose)
+            picked = pick_anchor(pose)
             if key:
                 keyframes.append(i)
                 for row in waiting:
