@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.matching.candidates import KeyframePicker
+from vgm_studio.processes import exit_with_parent, spawn
 from vgm_studio.slam.between import (
     ANCHOR_ANGLE_DEG,
     ANCHOR_DISTANCE,
@@ -29,7 +30,6 @@ from vgm_studio.slam.between import (
     Refiner,
     place_between,
 )
-from vgm_studio.slam.placing import exit_with_parent, spawn
 
 # Poses sent to the worker at a time.
 _CHUNK = 256

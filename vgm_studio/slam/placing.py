@@ -9,10 +9,6 @@ same whichever process placed its neighbours; a placement it has not sent yet is
 
 from __future__ import annotations
 
-import multiprocessing
-import os
-import threading
-import time
 from collections import deque
 from collections.abc import Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -24,6 +20,7 @@ from vgm_studio.datasets.scans import Scan
 from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.model.context import Context, LocalMapper, Placements, walk
+from vgm_studio.processes import exit_with_parent, spawn
 
 # Keyframes a job places: small enough that the first arrive soon, large enough that the
 # round trips cost little.
@@ -38,29 +35,6 @@ def _start(
     global _mapper
     _mapper = LocalMapper(scans, poses, context, ScanMatcher(config))
     exit_with_parent()
-
-
-def spawn() -> multiprocessing.context.SpawnContext:
-    """How worker processes start. Not fork: the parent runs threads (kiss-icp's, torch's)
-    whose locks a fork would copy held.
-
-    Raises:
-        OSError, RuntimeError: No processes here.
-    """
-    return multiprocessing.get_context("spawn")
-
-
-def exit_with_parent() -> None:
-    """Ends this worker process when its parent is gone: a parent killed outright (kill -9)
-    closes no pipe the worker waits on, and it would wait on."""
-    parent = os.getppid()
-
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(1.0)
-        os._exit(0)
-
-    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
 
 
 def _place(centres: list[int]) -> Placements:

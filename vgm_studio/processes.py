@@ -1,0 +1,31 @@
+"""Worker processes: how they start, and how they end with the process that started them."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import threading
+import time
+
+
+def spawn() -> multiprocessing.context.SpawnContext:
+    """How worker processes start. Not fork: the parent runs threads (kiss-icp's, torch's)
+    whose locks a fork would copy held.
+
+    Raises:
+        OSError, RuntimeError: No processes here.
+    """
+    return multiprocessing.get_context("spawn")
+
+
+def exit_with_parent() -> None:
+    """Ends this worker process when its parent is gone: a parent killed outright (kill -9)
+    closes no pipe the worker waits on, and it would wait on."""
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(0)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
