@@ -227,9 +227,10 @@ def branch_and_bound(
     bound = _scores(w, height, a, x, y)
     evaluated = len(a)
     floor = math.ceil(min_score * PEAK * len(points))
-    best = floor
-    for k in np.argsort(-bound, kind="stable")[:3]:
-        best = max(best, _leaf_score(w, _descend(w, a[k], x[k], y[k], height)))
+    # One greedy descent from the best block: on Intel's loop searches, descents from the
+    # best three cost more than the blocks they pruned (1.6 against 1.7 ms a search).
+    k = int(np.argmax(bound))
+    best = max(floor, _leaf_score(w, _descend(w, a[k], x[k], y[k], height)))
     for h in range(height, 0, -1):
         keep = bound >= best
         a, x, y = _children(a[keep], x[keep], y[keep], 2 ** (h - 1), w.reach)
