@@ -18,6 +18,7 @@ STAGES = {
     "errors": 0,
     "atomic": 0,
     "progress": 0,
+    "processes": 0,
     "datasets": 1,
     "maps": 1,
     "simulation": 2,
