@@ -105,6 +105,41 @@ def test_branch_and_bound_equals_brute_force_on_a_wrong_place(office):
     assert (fast.index, fast.score) == (slow.index, slow.score)
 
 
+def test_where_every_pose_ties_branch_and_bound_picks_brute_forces_first(office):
+    # A scan far off the submap scores 0 everywhere: the tie-break alone decides.
+    sub = submap_around(office, 100, depth=3)
+    pts = office.scans[500].points()[::3] + 500.0
+    window = SearchWindow(linear=0.3, angular=np.radians(2))
+    fast = branch_and_bound(sub, pts, np.zeros(3), window, step=np.radians(1))
+    slow = brute_force(sub, pts, np.zeros(3), window, step=np.radians(1))
+    assert fast is not None and slow is not None
+    assert (fast.index, fast.score) == (slow.index, slow.score) == ((0, 0, 0), 0.0)
+    assert branch_and_bound(sub, pts, np.zeros(3), window, min_score=0.01) is None
+
+
+@pytest.mark.parametrize("angular", [np.radians(5), np.pi])
+def test_compiled_cells_are_numpys_to_the_last_bit(office, angular):
+    from vgm_studio.matching import branch_bound
+
+    sub = submap_around(office, 60)
+    rng = np.random.default_rng(7)
+    # Points near cell edges, and some far off the grid.
+    points = np.concatenate([office.scans[70].points(), rng.uniform(-40, 40, (50, 2))])
+    guess = np.array([0.3, -0.2, 0.1])
+    w = branch_bound._discretise(sub, points, guess, SearchWindow(1.5, angular), None)
+    extra = (w.stride - sub.shape[1]) // 2
+    c, s = np.cos(w.angles)[:, None], np.sin(w.angles)[:, None]
+    wx = guess[0] + c * points[:, 0] - s * points[:, 1]
+    wy = guess[1] + s * points[:, 0] + c * points[:, 1]
+    cx = np.floor((wx - sub.origin[0]) / sub.resolution).astype(np.int64)
+    cy = np.floor((wy - sub.origin[1]) / sub.resolution).astype(np.int64)
+    nx, ny, r = *sub.shape, w.reach
+    near = (cx + r >= 0) & (cx - r < nx) & (cy + r >= 0) & (cy - r < ny)
+    expected = np.where(near, (cx + extra) * w.stride + cy + extra, r * w.stride + r)
+    assert (~near).any() and near.any()
+    assert np.array_equal(w.base, expected)
+
+
 def test_converges_from_2m_and_25deg_where_the_scan_matcher_does_not(office):
     rng = np.random.default_rng(7)
     matcher, pairwise = LoopMatcher(), ScanMatcher()

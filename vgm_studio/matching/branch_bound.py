@@ -10,13 +10,10 @@ above, so a block whose bound is below the best pose found so far is dropped who
 
 The discretisation is Cartographer's: angles in steps chosen so that the farthest end point
 moves at most one cell per step; each rotated scan is placed on the grid at the guess, and
-translations are whole cells added to those indices. The search here walks the tree level by
-level, scoring all surviving blocks of a level in one numpy gather (a Python depth-first walk
-costs more per node than the gather saves), with greedy descents to the leaves for a good lower
-bound early. It returns exactly the pose brute force over the same discretisation returns
-(``brute_force``), ties broken towards the lowest (angle, x, y) index. Pure numpy meets the
-20 ms per 6 m × 6 m × ±30° query target on one core (``benchmarks/bench_correlative.py``), so
-there is no compiled kernel.
+translations are whole cells added to those indices. The tree is walked depth first, best
+child first, in a compiled kernel (``bb_kernel``). It returns exactly the pose brute force over
+the same discretisation returns (``brute_force``), ties broken towards the lowest
+(angle, x, y) index.
 """
 
 from __future__ import annotations
@@ -27,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from vgm_studio.matching import bb_kernel
 from vgm_studio.matching.submap import PEAK, Submap
 
 # Cell indices gathered per chunk in ``_scores``: 256 KiB of scratch, reused through a search.
@@ -84,7 +82,8 @@ class _Window:
     base: NDArray[np.intp]
     reach: int
     stride: int
-    levels: tuple[NDArray[np.uint8], ...]
+    levels: NDArray[np.uint8]
+    """(depth + 1, cells): the padded levels, each flattened."""
     guess: NDArray[np.float64]
     resolution: float
     idx: NDArray[np.intp]
@@ -118,19 +117,13 @@ def _discretise(
     # Shared between windows of similar reach, as the padded copies are cached per size.
     extra = 64 * math.ceil(2 * reach / 64)
     levels = submap.padded(extra)
-    nx, ny = submap.shape
-    c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
-    wx = guess[0] + c * points[:, 0] - s * points[:, 1]
-    wy = guess[1] + s * points[:, 0] + c * points[:, 1]
-    cx = np.floor((wx - submap.origin[0]) / submap.resolution).astype(np.int64)
-    cy = np.floor((wy - submap.origin[1]) / submap.resolution).astype(np.int64)
-    near = (cx + reach >= 0) & (cx - reach < nx) & (cy + reach >= 0) & (cy - reach < ny)
-    stride = ny + 2 * extra
-    base = np.where(near, (cx + extra) * stride + (cy + extra), reach * stride + reach)
+    grid = (submap.origin, submap.resolution, submap.shape)
+    base = bb_kernel.cells(points, angles, guess, grid, reach, extra)
+    stride = submap.shape[1] + 2 * extra
     rows = max(1, _GATHER // max(1, len(points)))
     return _Window(
         angles=angles,
-        base=base.astype(np.intp),
+        base=base,
         reach=reach,
         stride=stride,
         levels=levels,
@@ -167,42 +160,6 @@ def _scores(
     return total
 
 
-def _children(
-    a: NDArray[np.intp], x: NDArray[np.intp], y: NDArray[np.intp], half: int, reach: int
-) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]:
-    """The four half-size blocks of each block, less those starting beyond the window."""
-    ca = np.repeat(a, 4)
-    cx = (x[:, None] + np.array([0, 0, half, half])).ravel()
-    cy = (y[:, None] + np.array([0, half, 0, half])).ravel()
-    inside = (cx <= reach) & (cy <= reach)
-    return ca[inside], cx[inside], cy[inside]
-
-
-def _descend(w: _Window, a: int, x: int, y: int, h: int) -> tuple[int, int, int]:
-    """Greedy walk from a block to a leaf, always into the best child: a lower bound."""
-    ia, ix, iy = np.array([a]), np.array([x]), np.array([y])
-    while h > 0:
-        ia, ix, iy = _children(ia, ix, iy, 2 ** (h - 1), w.reach)
-        h -= 1
-        best = int(np.argmax(_scores(w, h, ia, ix, iy)))
-        ia, ix, iy = ia[best : best + 1], ix[best : best + 1], iy[best : best + 1]
-    return int(ia[0]), int(ix[0]), int(iy[0])
-
-
-def _leaf_score(w: _Window, leaf: tuple[int, int, int]) -> int:
-    a, x, y = (np.array([v]) for v in leaf)
-    return int(_scores(w, 0, a, x, y)[0])
-
-
-def _first_best(
-    a: NDArray[np.intp], x: NDArray[np.intp], y: NDArray[np.intp], s: NDArray[np.signedinteger]
-) -> int:
-    """Index of the highest score, ties to the lowest (angle, x, y), as brute force picks."""
-    top = np.flatnonzero(s == s.max())
-    order = np.lexsort((y[top], x[top], a[top]))
-    return int(top[order[0]])
-
-
 def branch_and_bound(
     submap: Submap,
     points: NDArray[np.float64],
@@ -219,38 +176,16 @@ def branch_and_bound(
     if len(points) == 0:
         return None
     w = _discretise(submap, points, np.asarray(guess, np.float64), window, step)
-    side = 2 * w.reach + 1
-    height = min(submap.depth, math.ceil(math.log2(side)))
-    starts = np.arange(-w.reach, w.reach + 1, 2**height)
-    ga, gx, gy = np.meshgrid(np.arange(len(w.angles)), starts, starts, indexing="ij")
-    a, x, y = ga.ravel(), gx.ravel(), gy.ravel()
-    bound = _scores(w, height, a, x, y)
-    evaluated = len(a)
+    height = min(submap.depth, math.ceil(math.log2(2 * w.reach + 1)))
     floor = math.ceil(min_score * PEAK * len(points))
-    # One greedy descent from the best block: on Intel's loop searches, descents from the
-    # best three cost more than the blocks they pruned (1.6 against 1.7 ms a search).
-    k = int(np.argmax(bound))
-    best = max(floor, _leaf_score(w, _descend(w, a[k], x[k], y[k], height)))
-    for h in range(height, 0, -1):
-        keep = bound >= best
-        a, x, y = _children(a[keep], x[keep], y[keep], 2 ** (h - 1), w.reach)
-        bound = _scores(w, h - 1, a, x, y)
-        evaluated += len(a)
-        if len(a) == 0:
-            return None
-        if h > 1:
-            k = int(np.argmax(bound))
-            leaf = _descend(w, a[k], x[k], y[k], h - 1)
-            best = max(best, _leaf_score(w, leaf))
-    keep = bound >= best
-    if not keep.any():
+    found = bb_kernel.search(w.levels, w.base, w.stride, w.reach, height, floor)
+    if found is None:
         return None
-    a, x, y, bound = a[keep], x[keep], y[keep], bound[keep]
-    i = _first_best(a, x, y, bound)
+    score, a, x, y, evaluated = found
     return Hit(
-        pose=w.pose(int(a[i]), int(x[i]), int(y[i])),
-        score=float(bound[i]) / (PEAK * len(points)),
-        index=(int(a[i]), int(x[i]) + w.reach, int(y[i]) + w.reach),
+        pose=w.pose(a, x, y),
+        score=score / (PEAK * len(points)),
+        index=(a, x + w.reach, y + w.reach),
         evaluated=evaluated,
     )
 

@@ -57,9 +57,7 @@ class Submap:
     sigma: float
     normal_neighbors: int = 6
     _target: list[Target] = field(default_factory=list, repr=False, compare=False)
-    _padded: dict[int, tuple[NDArray[np.uint8], ...]] = field(
-        default_factory=dict, repr=False, compare=False
-    )
+    _padded: dict[int, NDArray[np.uint8]] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def depth(self) -> int:
@@ -170,15 +168,17 @@ class Submap:
             self._target.append(Target.build(self.points, self.normal_neighbors))
         return self._target[0]
 
-    def padded(self, extra: int) -> tuple[NDArray[np.uint8], ...]:
+    def padded(self, extra: int) -> NDArray[np.uint8]:
         """The levels with ``extra`` more empty cells on every side (cell (i, j) becomes
-        (i + extra, j + extra)), kept for the next query that needs the same padding.
+        (i + extra, j + extra)), each flattened into a row of one (depth + 1, cells) array,
+        kept for the next query that needs the same padding.
 
         Padding is exact: every block starting in it covers only empty cells, as the grid's own
         padding is wider than the largest block.
         """
         if extra not in self._padded:
-            self._padded[extra] = tuple(_pad(level, extra) for level in self.levels)
+            rows = [_pad(level, extra).ravel() for level in self.levels]
+            self._padded[extra] = np.stack(rows)
         return self._padded[extra]
 
     def cells(self, points: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
