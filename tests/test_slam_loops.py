@@ -424,3 +424,28 @@ def test_the_final_sweep_searches_only_revisits_left_unclosed():
     then = dict.fromkeys(range(count), shifted)
     again = unclosed_candidates(nothing_closed, poses, graph, config, then)
     assert [(c.a, c.b) for c in again] == pairs
+
+
+def test_path_sums_are_numpys_rounds_to_the_last_bit_and_the_paths_own_sums():
+    from vgm_studio.slam.uncertainty import _jump_sums
+
+    rng = np.random.default_rng(4)
+    n = 3000
+    # A random forest: each node hangs off an earlier one (or is a root), as a shortest-path
+    # tree does, and its own edge's (translational, rotational, length) row.
+    parent = np.array(
+        [k if k == 0 or rng.random() < 0.01 else rng.integers(0, k) for k in range(n)]
+    )
+    rows = rng.uniform(0.0, 1.0, (n, 3))
+    rows[parent == np.arange(n)] = 0.0
+    got = _jump_sums(rows.copy(), parent)
+    acc, jump = rows.copy(), parent
+    while not np.array_equal(jump[jump], jump):
+        acc += acc[jump]
+        jump = jump[jump]
+    assert np.array_equal(got, acc)
+    for v in rng.integers(0, n, 20):
+        total, k = np.zeros(3), int(v)
+        while parent[k] != k:
+            total, k = total + rows[k], int(parent[k])
+        np.testing.assert_allclose(got[v], total, rtol=1e-12)

@@ -12,22 +12,15 @@ so the two threads that match loop candidates search at once.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any, TypeVar, cast
+from typing import Any
 
-import numba
 import numpy as np
 from numpy.typing import NDArray
 
-_F = TypeVar("_F", bound=Callable[..., Any])
+from vgm_studio.core.compiled import kernel
 
 
-def _jit(f: _F) -> _F:
-    """Compiled on first call, kept in ``__pycache__`` for the next process; the GIL let go."""
-    return cast(_F, numba.njit(cache=True, nogil=True)(f))
-
-
-@_jit
+@kernel
 def _score(level: Any, base: Any, a: int, shift: int) -> int:
     total = 0
     row = base[a]
@@ -36,13 +29,13 @@ def _score(level: Any, base: Any, a: int, shift: int) -> int:
     return total
 
 
-@_jit
+@kernel
 def _before(a: int, x: int, y: int, ba: int, bx: int, by: int) -> bool:
     """(a, x, y) comes before (ba, bx, by): brute force's tie-break, lowest index first."""
     return a < ba or (a == ba and (x < bx or (x == bx and y < by)))
 
 
-@_jit
+@kernel
 def _top(levels: Any, base: Any, stride: int, reach: int, height: int) -> Any:
     """(bound, a, x, y) of every top block, best first (ties in index order)."""
     size = 1 << height
@@ -59,7 +52,7 @@ def _top(levels: Any, base: Any, stride: int, reach: int, height: int) -> Any:
     return top[np.argsort(-top[:, 0], kind="mergesort")]
 
 
-@_jit
+@kernel
 def _children(levels: Any, base: Any, stride: int, reach: int, node: Any, kids: Any) -> int:
     """Fills ``kids`` with the (bound, x, y) of ``node``'s children inside the window, best
     first (ties: the first index); returns how many."""
@@ -85,7 +78,7 @@ def _children(levels: Any, base: Any, stride: int, reach: int, node: Any, kids: 
     return n
 
 
-@_jit
+@kernel
 def _walk(levels: Any, base: Any, stride: int, reach: int, height: int, floor: int) -> Any:
     """See ``search``; returns (score, a, x, y, found, evaluated)."""
     top = _top(levels, base, stride, reach, height)
@@ -118,7 +111,7 @@ def _walk(levels: Any, base: Any, stride: int, reach: int, height: int, floor: i
     return best, ba, bx, by, found, evaluated
 
 
-@_jit
+@kernel
 def _cells(points: Any, cos: Any, sin: Any, frame: Any, reach: int, shape: Any, extra: int) -> Any:
     gx, gy, ox, oy, resolution = frame[0], frame[1], frame[2], frame[3], frame[4]
     nx, ny = shape[0], shape[1]

@@ -13,12 +13,14 @@ variance grows by Vθ·L²/3 (the sum over a straight chain of equal steps).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from vgm_studio.core.compiled import kernel
 from vgm_studio.graph.pose_graph import GraphEdge
 
 # A heading error acts over metres before the next loop: this lever ranks paths by the
@@ -126,19 +128,38 @@ def _accumulate(
     nodes = np.arange(n)
     reach = np.isfinite(dist)
     parent = np.where(reach & (pred >= 0), pred, nodes)
-    # Each node's own edge to its parent, then pointer jumping: after k rounds every node holds
-    # the sums over its 2^k nearest ancestors' edges, so log2(n) rounds sum whole paths.
-    acc = values[edges.rows(parent, nodes)]
-    jump = parent
-    # The source (and an unreached node) points to itself and holds zero.
-    while True:
-        further = jump[jump]
-        if np.array_equal(further, jump):
-            break
-        acc += acc[jump]
-        jump = further
+    # Each node's own edge to its parent, summed up the path by pointer jumping.
+    acc = _jump_sums(values[edges.rows(parent, nodes)], parent)
     acc[~reach] = np.inf
     t, r, length = acc[:count, 0], acc[:count, 1], acc[:count, 2]
     with np.errstate(invalid="ignore"):
         position = np.where(np.isfinite(t), t + r * length**2 / 3.0, np.inf)
     return Relative(position, r)
+
+
+@kernel
+def _jump_sums(acc: Any, parent: Any) -> Any:
+    """Each node's row of ``acc`` summed over its path to the root of ``parent``'s forest (a
+    root is its own parent and holds zeros), by pointer jumping: after k rounds every node
+    holds the sums over its 2^k nearest ancestors' edges, so log2(n) rounds sum whole paths.
+
+    Compiled, it adds in the order numpy's ``acc += acc[jump]`` rounds did (each round reads
+    the last round's sums), so the sums are the same to the last bit, at a quarter of the
+    time: the rounds were half of an audit's group check on the Killian Court graph.
+    """
+    n = len(parent)
+    jump = parent.copy()
+    further = np.empty_like(jump)
+    before = np.empty_like(acc)
+    while True:
+        moved = False
+        for v in range(n):
+            further[v] = jump[jump[v]]
+            moved = moved or further[v] != jump[v]
+        if not moved:
+            return acc
+        before[:] = acc
+        for v in range(n):
+            for k in range(acc.shape[1]):
+                acc[v, k] += before[jump[v], k]
+        jump[:] = further
