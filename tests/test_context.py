@@ -342,6 +342,24 @@ def test_a_point_is_seen_inside_the_view_up_to_the_beam_and_its_margin():
     assert seen_by(scan, points, 0.6)[2]  # a wider margin takes it in
 
 
+def test_the_compiled_test_is_numpys_point_for_point():
+    rng = np.random.default_rng(5)
+    ranges = rng.uniform(0.5, 8.0, 181).astype(np.float32)
+    ranges[rng.random(181) < 0.2] = 30.0  # no return
+    ranges[:3] = 0.0  # too short to be a point
+    scan = Scan(0, 0.0, ranges, -math.pi / 2, math.pi / 180, 30.0)
+    points = rng.uniform(-35, 35, (20_000, 2))
+    bearing = np.arctan2(points[:, 1], points[:, 0])
+    beam = np.rint(se2.wrap_angle(bearing - scan.angle_min) / scan.angle_increment)
+    beam = np.where(beam < 0, beam + round(2 * math.pi / abs(scan.angle_increment)), beam)
+    inside = (beam >= 0) & (beam < scan.num_beams)
+    reach = np.where(scan.valid(), scan.ranges, scan.max_range).astype(np.float64)
+    idx = np.clip(beam, 0, scan.num_beams - 1).astype(np.int64)
+    numpy = inside & (np.hypot(points[:, 0], points[:, 1]) <= reach[idx] + 0.3)
+    assert 0 < numpy.sum() < len(points)
+    np.testing.assert_array_equal(seen_by(scan, points, 0.3), numpy)
+
+
 def test_what_a_mounted_laser_saw_is_judged_in_the_laser_frame():
     """The same beams from a laser 0.5 m ahead of the base, turned 90° and upside down: a
     point is seen exactly where its place in the laser frame is."""

@@ -21,12 +21,15 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from vgm_studio.core import se2
+from vgm_studio.core.compiled import kernel
 from vgm_studio.datasets import Scan
+from vgm_studio.datasets.scans import MIN_VALID_RANGE
 from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.matcher import ScanMatcher
 
@@ -138,13 +141,34 @@ def seen_by(scan: Scan, points: NDArray[np.float64], margin: float) -> NDArray[n
     pts = np.asarray(points, dtype=np.float64)
     if scan.mount is not None:
         pts = scan.mount.unplace(pts)
-    bearing = np.arctan2(pts[:, 1], pts[:, 0])
-    beam = np.rint(se2.wrap_angle(bearing - scan.angle_min) / scan.angle_increment)
-    beam = np.where(beam < 0, beam + round(2 * math.pi / abs(scan.angle_increment)), beam)
-    inside = (beam >= 0) & (beam < scan.num_beams)
-    reach = np.where(scan.valid(), scan.ranges, scan.max_range).astype(np.float64)
-    idx = np.clip(beam, 0, scan.num_beams - 1).astype(np.int64)
-    return inside & (np.hypot(pts[:, 0], pts[:, 1]) <= reach[idx] + margin)
+    # The beam's test in float32, as ``Scan.valid`` reads the ranges.
+    limits = np.array([MIN_VALID_RANGE, scan.max_range], np.float32)
+    turn = round(2 * math.pi / abs(scan.angle_increment))
+    beams = (scan.angle_min, scan.angle_increment, margin)
+    seen: NDArray[np.bool_] = _seen(np.ascontiguousarray(pts), scan.ranges, limits, beams, turn)
+    return seen
+
+
+@kernel
+def _seen(pts: Any, ranges: Any, limits: Any, beams: Any, turn: int) -> Any:
+    """``seen_by``'s test point by point, in numpy's order of operations; an audit asks it
+    12,000 times on the Killian Court graph, each for a few hundred points."""
+    angle_min, increment, margin = beams
+    out = np.empty(len(pts), np.bool_)
+    for i in range(len(pts)):
+        x, y = pts[i, 0], pts[i, 1]
+        bearing = np.arctan2(y, x) - angle_min
+        beam = np.rint((np.pi - np.mod(np.pi - bearing, 2.0 * np.pi)) / increment)
+        if beam < 0:
+            beam += turn
+        if not 0 <= beam < len(ranges):
+            out[i] = False
+            continue
+        r = ranges[int(beam)]
+        returned = r >= limits[0] and r < limits[1] and np.isfinite(r)
+        reach = np.float64(r) if returned else np.float64(limits[1])
+        out[i] = np.hypot(x, y) <= reach + margin
+    return out
 
 
 class LocalMapper:
