@@ -170,7 +170,7 @@ def search(
     to the lowest (angle, x, y), as brute force picks; None where none reaches ``floor``.
 
     Args:
-        levels: (height + 1, cells) the padded max levels, each flattened.
+        levels: (depth + 1, cells) the padded max levels, each flattened (depth ≥ height).
         base: (angles, points) each point's flat cell index at each angle, unshifted.
         stride: Flat index step of one cell along x.
         reach: The window's half-width in cells: x, y run over -reach..reach.

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from vgm_studio.matching import bb_kernel
 from vgm_studio.matching.submap import PEAK, Submap
 
-# Cell indices gathered per chunk in ``_scores``: 256 KiB of scratch, reused through a search.
+# Cell indices gathered per chunk in ``_scores``: 256 KiB of scratch, reused through a call.
 _GATHER = 1 << 15
 
 
@@ -86,10 +86,6 @@ class _Window:
     """(depth + 1, cells): the padded levels, each flattened."""
     guess: NDArray[np.float64]
     resolution: float
-    idx: NDArray[np.intp]
-    """Scratch for one chunk of candidates' cell indices (``_scores``)."""
-    cells: NDArray[np.uint8]
-    """…and for the cells they read."""
 
     def pose(self, a: int, x: int, y: int) -> NDArray[np.float64]:
         r = self.resolution
@@ -120,7 +116,6 @@ def _discretise(
     grid = (submap.origin, submap.resolution, submap.shape)
     base = bb_kernel.cells(points, angles, guess, grid, reach, extra)
     stride = submap.shape[1] + 2 * extra
-    rows = max(1, _GATHER // max(1, len(points)))
     return _Window(
         angles=angles,
         base=base,
@@ -129,28 +124,29 @@ def _discretise(
         levels=levels,
         guess=np.asarray(guess, np.float64),
         resolution=submap.resolution,
-        idx=np.empty((rows, len(points)), np.intp),
-        cells=np.empty((rows, len(points)), np.uint8),
     )
 
 
 def _scores(
     w: _Window, h: int, a: NDArray[np.intp], x: NDArray[np.intp], y: NDArray[np.intp]
 ) -> NDArray[np.int32]:
-    """Sum of level h under the scan at each candidate (angle a, shifted x, y cells).
+    """Sum of level h under the scan at each candidate (angle a, shifted x, y cells), in numpy:
+    what ``brute_force`` scores every pose with.
 
-    The gather goes through the window's scratch a chunk of candidates at a time. One gather
-    of every candidate at once allocates tens of megabytes per call, and the kernel zeroes
-    every fresh page: on a newly started machine, whose pages are dear, that was 37% of a
-    CSAIL SLAM run's CPU time.
+    The gather goes through scratch a chunk of candidates at a time (``_chunk_rows``). One
+    gather of every candidate at once allocates tens of megabytes per call, and the kernel
+    zeroes every fresh page: on a newly started machine, whose pages are dear, that was 37%
+    of a CSAIL SLAM run's CPU time when branch and bound scored this way.
     """
     shift = (x * w.stride + y).astype(np.intp)
     # int32 holds 255 × 8 million points, and sums a quarter faster than int64.
     total = np.empty(len(a), np.int32)
-    rows = len(w.idx)
+    rows = _chunk_rows(w.base.shape[1])
+    scratch_idx = np.empty((rows, w.base.shape[1]), np.intp)
+    scratch_cells = np.empty((rows, w.base.shape[1]), np.uint8)
     for start in range(0, len(a), rows):
         stop = min(start + rows, len(a))
-        idx, cells = w.idx[: stop - start], w.cells[: stop - start]
+        idx, cells = scratch_idx[: stop - start], scratch_cells[: stop - start]
         # mode="clip" skips take's bounds check and its buffered copy; the padding keeps
         # every index inside the grid.
         np.take(w.base, a[start:stop], axis=0, out=idx, mode="clip")
@@ -158,6 +154,11 @@ def _scores(
         np.take(w.levels[h], idx, out=cells, mode="clip")
         cells.sum(axis=1, dtype=np.int32, out=total[start:stop])
     return total
+
+
+def _chunk_rows(points: int) -> int:
+    """Candidates per chunk of ``_scores``' gather, for a scan of ``points`` points."""
+    return max(1, _GATHER // max(1, points))
 
 
 def branch_and_bound(

@@ -144,8 +144,9 @@ def _jump_sums(acc: Any, parent: Any) -> Any:
     holds the sums over its 2^k nearest ancestors' edges, so log2(n) rounds sum whole paths.
 
     Compiled, it adds in the order numpy's ``acc += acc[jump]`` rounds did (each round reads
-    the last round's sums), so the sums are the same to the last bit, at a quarter of the
-    time: the rounds were half of an audit's group check on the Killian Court graph.
+    the last round's sums), so the sums are the same to the last bit, in 0.16 ms a source
+    against 0.4–0.5: the rounds were a third of an audit's group check on the Killian Court
+    graph.
     """
     n = len(parent)
     jump = parent.copy()
