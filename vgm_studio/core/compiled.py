@@ -12,5 +12,6 @@ _F = TypeVar("_F", bound=Callable[..., Any])
 
 def kernel(f: _F) -> _F:
     """Compiles ``f`` on its first call, kept in ``__pycache__`` for the next process; the
-    compiled code lets go of the GIL, so threads run it at once."""
-    return cast(_F, numba.njit(cache=True, nogil=True)(f))
+    compiled code lets go of the GIL, so threads run it at once. Division follows numpy (a
+    float divided by zero is inf or NaN, not an exception), as the numpy it replaces did."""
+    return cast(_F, numba.njit(cache=True, nogil=True, error_model="numpy")(f))

@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from vgm_studio.core import se2
 from vgm_studio.core.cpus import usable_threads
+from vgm_studio.vgm.cell_kernel import cell_moments
 
 DEFAULT_SIZE = 400
 DEFAULT_RESOLUTION = 0.05
@@ -64,9 +65,9 @@ def batch_cells(
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float32]]:
     """The occupied cells of many VGM channels at once, one channel per point cloud.
 
-    One pass of numpy over all the clouds' points instead of one per cloud: a batch of 256
-    pairs costs a few dozen array operations, not a few thousand. Each channel's values are
-    those ``grid_cells`` gives it alone (same sums in the same order; n_max is per channel).
+    One compiled pass over all the clouds' points (``cell_kernel``) instead of a call per
+    cloud. Each channel's values are those ``grid_cells`` gives it alone (same sums in the
+    same order; n_max is per channel).
 
     Args:
         clouds: (N_k, 2) points in metres, one array per channel; empty ones are allowed.
@@ -81,10 +82,12 @@ def batch_cells(
     arrays = [np.asarray(c, dtype=np.float64).reshape(-1, 2) for c in clouds]
     parts = _parts(arrays)
     if len(parts) == 1:
-        return _cells(arrays, size, resolution, sigma)
-    # numpy's sorts and sums let go of the GIL: a large batch is built in parts at once, and
-    # each channel's values do not depend on the others'.
-    built = list(_pool().map(lambda p: _cells(arrays[p[0] : p[1]], size, resolution, sigma), parts))
+        return cell_moments(arrays, size, resolution, sigma)
+    # The kernel lets go of the GIL: a large batch is built in parts at once, and each
+    # channel's values do not depend on the others'.
+    built = list(
+        _pool().map(lambda p: cell_moments(arrays[p[0] : p[1]], size, resolution, sigma), parts)
+    )
     return (
         np.concatenate([ch + start for (start, _), (ch, _, _) in zip(parts, built, strict=True)]),
         np.concatenate([cell for _, cell, _ in built]),
@@ -113,48 +116,6 @@ def _pool() -> ThreadPoolExecutor:
     if threads not in _POOLS:
         _POOLS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="vgm")
     return _POOLS[threads]
-
-
-def _cells(
-    arrays: Sequence[NDArray[np.float64]], size: int, resolution: float, sigma: float
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float32]]:
-    pts = np.concatenate(arrays) if arrays else np.zeros((0, 2))
-    # 32-bit keys where they fit (a batch of up to 13,000 clouds on 400² cells) sort faster.
-    kind = np.int32 if len(arrays) * size * size < 2**31 else np.int64
-    owner = np.repeat(np.arange(len(arrays), dtype=kind), [len(a) for a in arrays])
-    half = 0.5 * size * resolution
-    ij = np.floor((pts + half) / resolution)
-    col, row = ij[:, 0], ij[:, 1]
-    inside = (col >= 0) & (col < size) & (row >= 0) & (row < size)
-    if not inside.any():
-        empty = np.zeros(0, dtype=np.int64)
-        return empty, empty.copy(), np.zeros(0, dtype=np.float32)
-    if not inside.all():  # most batches lie wholly on the grid: no copies then
-        pts, owner, ij = pts[inside], owner[inside], ij[inside]
-    ij = ij.astype(kind)
-    # Work in offsets from each point's cell centre: small numbers, so the moments stay exact.
-    d = pts - ((ij + 0.5) * resolution - half)
-    key = (owner * size + ij[:, 1]) * size + ij[:, 0]
-    key, inv, n = np.unique(key, return_inverse=True, return_counts=True)
-    channel, cell = np.divmod(key.astype(np.int64), size * size)
-    dx, dy = d[:, 0], d[:, 1]
-    mx = np.bincount(inv, dx) / n
-    my = np.bincount(inv, dy) / n
-    var = sigma * sigma
-    sxx = np.bincount(inv, dx * dx) / n - mx * mx + var
-    syy = np.bincount(inv, dy * dy) / n - my * my + var
-    sxy = np.bincount(inv, dx * dy) / n - mx * my
-    det = sxx * syy - sxy * sxy
-    # (c − μ) = −(mx, my); the quadratic form with the 2×2 inverse written out.
-    mahal = (syy * mx * mx - 2.0 * sxy * mx * my + sxx * my * my) / det
-    value = np.exp(-0.5 * mahal) * (n / _channel_max(channel, n))
-    return channel, cell, value.astype(np.float32)
-
-
-def _channel_max(channel: NDArray[np.int64], n: NDArray[np.int64]) -> NDArray[np.int64]:
-    """Each cell's channel's largest count, for cells sorted by channel."""
-    starts = np.flatnonzero(np.r_[True, channel[1:] != channel[:-1]])
-    return np.repeat(np.maximum.reduceat(n, starts), np.diff(np.r_[starts, len(n)]))
 
 
 def grid_map(
