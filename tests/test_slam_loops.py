@@ -426,26 +426,33 @@ def test_the_final_sweep_searches_only_revisits_left_unclosed():
     assert [(c.a, c.b) for c in again] == pairs
 
 
-def test_path_sums_are_numpys_rounds_to_the_last_bit_and_the_paths_own_sums():
-    from vgm_studio.slam.uncertainty import _jump_sums
+def test_path_sums_are_each_nodes_sums_over_its_path_to_the_root():
+    from vgm_studio.slam.uncertainty import _path_sums
 
     rng = np.random.default_rng(4)
     n = 3000
     # A random forest: each node hangs off an earlier one (or is a root), as a shortest-path
-    # tree does, and its own edge's (translational, rotational, length) row.
+    # tree does, listed out of order; each edge's (translational, rotational, length) row is
+    # found by its key among the sorted keys, one past row 0 of zeros.
     parent = np.array(
         [k if k == 0 or rng.random() < 0.01 else rng.integers(0, k) for k in range(n)]
     )
-    rows = rng.uniform(0.0, 1.0, (n, 3))
-    rows[parent == np.arange(n)] = 0.0
-    got = _jump_sums(rows.copy(), parent)
-    acc, jump = rows.copy(), parent
-    while not np.array_equal(jump[jump], jump):
-        acc += acc[jump]
-        jump = jump[jump]
-    assert np.array_equal(got, acc)
-    for v in rng.integers(0, n, 20):
-        total, k = np.zeros(3), int(v)
+    shuffle = rng.permutation(n)
+    parent = np.argsort(shuffle)[parent[shuffle]]
+    child = np.flatnonzero(parent != np.arange(n))
+    keys = np.minimum(parent[child], child) * n + np.maximum(parent[child], child)
+    order = np.argsort(keys)
+    rows = rng.uniform(0.0, 1.0, (len(child), 3))
+    values = np.vstack([np.zeros((1, 3)), rows[order]])
+    got = _path_sums(parent, keys[order], values)
+    own = dict(zip(child.tolist(), rows, strict=True))
+    for v in range(n):
+        total, k = np.zeros(3), v
+        path = []
         while parent[k] != k:
-            total, k = total + rows[k], int(parent[k])
-        np.testing.assert_allclose(got[v], total, rtol=1e-12)
+            path.append(k)
+            k = int(parent[k])
+        for k in reversed(path):  # from the root down, as the tree is walked
+            total = total + own[k]
+        assert np.array_equal(got[v], total), v
+    assert np.count_nonzero(got[:, 2] > 5.0) > 100  # long paths were summed
