@@ -157,7 +157,8 @@ def dense_reference(log: ScanLog, odometry: NDArray[np.float64]) -> NDArray[np.f
 
 
 def _usable(log: ScanLog) -> NDArray[np.bool_]:
-    return np.array([len(s.points()) >= MIN_POINTS for s in log.scans])
+    # A scan's points are its valid beams: counted without placing them.
+    return np.array([np.count_nonzero(s.valid()) >= MIN_POINTS for s in log.scans])
 
 
 def _between_stream(
