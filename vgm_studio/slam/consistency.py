@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from vgm_studio.core import se2
+from vgm_studio.core.cliques import largest_clique_size
 from vgm_studio.slam.config import ConsistencyConfig
 from vgm_studio.slam.uncertainty import Relative, UncertaintyGraph
 
@@ -217,10 +218,7 @@ def _rivalled(supports: nx.Graph, members: set[int], support: int) -> bool:
 
 
 def _largest_group(graph: nx.Graph) -> int:
-    if graph.number_of_nodes() == 0:
-        return 0
-    clique, _ = nx.max_weight_clique(graph, weight=None)
-    return len(clique)
+    return largest_clique_size(graph.nodes, graph.edges)
 
 
 def _variances(cov: NDArray[np.float64]) -> tuple[float, float]:

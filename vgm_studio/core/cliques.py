@@ -1,0 +1,60 @@
+"""The size of a graph's largest clique, exactly, with vertex sets as bitsets.
+
+networkx's ``max_weight_clique`` asks ``has_edge`` once per pair it looks at: on the dense
+support graphs of a corridor's loops that was 460,000 calls and 1.5 s of an Intel SLAM run.
+Here a vertex's neighbours are one Python int, and a branch's candidates one AND: Tomita and
+Seki's MCQ, each branch bounded by a greedy colouring of its candidates (a set coloured with
+k colours holds no clique of more than k vertices).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Iterable
+
+
+def largest_clique_size(
+    nodes: Iterable[Hashable], edges: Iterable[tuple[Hashable, Hashable]]
+) -> int:
+    """The number of vertices in a largest clique of the graph (0 for no vertex); edges to a
+    vertex not in ``nodes`` and self-loops are left out."""
+    index = {v: k for k, v in enumerate(nodes)}
+    neighbours = [0] * len(index)
+    for u, v in edges:
+        if u != v and u in index and v in index:
+            neighbours[index[u]] |= 1 << index[v]
+            neighbours[index[v]] |= 1 << index[u]
+    best = 0
+
+    def expand(size: int, candidates: int) -> None:
+        nonlocal best
+        if not candidates:
+            best = max(best, size)
+            return
+        order, colours = _coloured(candidates, neighbours)
+        for v, colour in zip(reversed(order), reversed(colours), strict=True):
+            if size + colour <= best:
+                return
+            expand(size + 1, candidates & neighbours[v])
+            candidates &= ~(1 << v)
+
+    expand(0, (1 << len(index)) - 1)
+    return best
+
+
+def _coloured(candidates: int, neighbours: list[int]) -> tuple[list[int], list[int]]:
+    """The candidates in colour classes, greedily: each class a set of mutually non-adjacent
+    vertices; each vertex with its class's number, classes in order."""
+    order: list[int] = []
+    colours: list[int] = []
+    colour = 0
+    left = candidates
+    while left:
+        colour += 1
+        free = left
+        while free:
+            v = (free & -free).bit_length() - 1
+            free &= ~neighbours[v] & ~(1 << v)
+            left &= ~(1 << v)
+            order.append(v)
+            colours.append(colour)
+    return order, colours
