@@ -18,7 +18,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from vgm_studio.core import se2
 from vgm_studio.core.cpus import usable_threads
-from vgm_studio.vgm.cell_kernel import cell_moments
 
 DEFAULT_SIZE = 400
 DEFAULT_RESOLUTION = 0.05
@@ -79,6 +78,10 @@ def batch_cells(
         (channel, cell, value): for every occupied cell the index of its cloud, its flat
         index i·size + j and its value; sorted by channel, then cell.
     """
+    # Imported here: numba brings scipy, and ``label`` and ``demo`` check their port before
+    # any slow import (VGMParams is read long before a VGM is built).
+    from vgm_studio.vgm.cell_kernel import cell_moments
+
     arrays = [np.asarray(c, dtype=np.float64).reshape(-1, 2) for c in clouds]
     parts = _parts(arrays)
     if len(parts) == 1:
