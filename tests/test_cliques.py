@@ -25,3 +25,11 @@ def test_no_vertex_self_loops_and_edges_to_strangers():
     # The triangle's third edge goes to a vertex not in the graph: a pair is all there is.
     assert largest_clique_size(["a", "b", "c"], [("a", "b"), ("b", "d"), ("a", "d")]) == 2
     assert largest_clique_size("abcd", [(u, v) for u in "abcd" for v in "abcd"]) == 4
+
+
+def test_a_clique_deeper_than_pythons_recursion_limit():
+    """A hostile graph's thousand-vertex clique: networkx's recursive search raised
+    RecursionError on it; the search here keeps its own stack."""
+    graph = nx.complete_graph(1200)
+    graph.remove_edge(0, 1)
+    assert largest_clique_size(graph.nodes, graph.edges) == 1199

@@ -23,21 +23,22 @@ def largest_clique_size(
         if u != v and u in index and v in index:
             neighbours[index[u]] |= 1 << index[v]
             neighbours[index[v]] |= 1 << index[u]
+    # Depth first with an explicit stack, not recursion: a clique of a thousand vertices
+    # (a hostile graph's) would pass Python's recursion limit, as networkx's search did.
     best = 0
-
-    def expand(size: int, candidates: int) -> None:
-        nonlocal best
+    stack = [(0, (1 << len(index)) - 1, *_coloured((1 << len(index)) - 1, neighbours))]
+    while stack:
+        size, candidates, order, colours = stack.pop()
         if not candidates:
             best = max(best, size)
-            return
-        order, colours = _coloured(candidates, neighbours)
-        for v, colour in zip(reversed(order), reversed(colours), strict=True):
-            if size + colour <= best:
-                return
-            expand(size + 1, candidates & neighbours[v])
-            candidates &= ~(1 << v)
-
-    expand(0, (1 << len(index)) - 1)
+            continue
+        # The last vertex coloured first: its colour bounds what it and the rest can add.
+        v, colour = order.pop(), colours.pop()
+        if size + colour <= best:
+            continue
+        stack.append((size, candidates & ~(1 << v), order, colours))
+        inner = candidates & neighbours[v]
+        stack.append((size + 1, inner, *_coloured(inner, neighbours)))
     return best
 
 
