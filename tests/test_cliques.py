@@ -25,6 +25,7 @@ def test_no_vertex_self_loops_and_edges_to_strangers():
     # The triangle's third edge goes to a vertex not in the graph: a pair is all there is.
     assert largest_clique_size(["a", "b", "c"], [("a", "b"), ("b", "d"), ("a", "d")]) == 2
     assert largest_clique_size("abcd", [(u, v) for u in "abcd" for v in "abcd"]) == 4
+    assert largest_clique_size(["a", "a", "b"], [("a", "b")]) == 2  # listed twice, one vertex
 
 
 def test_a_clique_deeper_than_pythons_recursion_limit():

@@ -456,3 +456,9 @@ def test_path_sums_are_each_nodes_sums_over_its_path_to_the_root():
             total = total + own[k]
         assert np.array_equal(got[v], total), v
     assert np.count_nonzero(got[:, 2] > 5.0) > 100  # long paths were summed
+    # Compiled code checks no bounds: what is not a forest, or an edge not among the keys,
+    # raises instead of reading or writing past the arrays.
+    zeros = np.zeros((2, 3))
+    for bad_parent, bad_keys in [([1, 0, 2], [1]), ([0, 5], [1]), ([0, 0, 0], [1])]:
+        with pytest.raises(ValueError):
+            _path_sums(np.array(bad_parent), np.array(bad_keys, dtype=np.int64), zeros)

@@ -201,6 +201,7 @@ def test_compiled_cells_equal_numpys_sort_and_bincount_to_the_bit(datasets):
         p = rng.normal(0.0, rng.uniform(0.05, 15.0), (int(rng.integers(0, 300)), 2))
         if len(p):
             p[rng.integers(0, len(p), 3)] = rng.choice([np.nan, np.inf, -np.inf])
+            p[rng.integers(0, len(p)), int(rng.integers(0, 2))] = np.nan  # one coordinate
         hostile.append(np.round(p / 0.05) * 0.05 if rng.random() < 0.3 else p)
     for clouds, size, resolution, sigma in [
         (real, 400, 0.05, 0.02),

@@ -17,7 +17,9 @@ def largest_clique_size(
 ) -> int:
     """The number of vertices in a largest clique of the graph (0 for no vertex); edges to a
     vertex not in ``nodes`` and self-loops are left out."""
-    index = {v: k for k, v in enumerate(nodes)}
+    index: dict[Hashable, int] = {}
+    for v in nodes:  # a vertex listed twice is one vertex
+        index.setdefault(v, len(index))
     neighbours = [0] * len(index)
     for u, v in edges:
         if u != v and u in index and v in index:

@@ -139,6 +139,10 @@ def _path_sums(parent: Any, keys: Any, values: Any) -> Any:
         # Up to the first node already summed (or a root), then down again.
         depth, u = 0, v
         while not done[u] and parent[u] != u:
+            # Compiled code checks no bounds: a parent out of range or a cycle (a path
+            # longer than the forest has nodes) would write past the arrays, not raise.
+            if depth == n or not 0 <= parent[u] < n:
+                raise ValueError("parent is not a forest over its nodes")
             path[depth] = u
             depth += 1
             u = parent[u]
@@ -149,7 +153,10 @@ def _path_sums(parent: Any, keys: Any, values: Any) -> Any:
             depth -= 1
             w = path[depth]
             p = parent[w]
-            row = np.searchsorted(keys, min(p, w) * n + max(p, w)) + 1
+            key = min(p, w) * n + max(p, w)
+            row = np.searchsorted(keys, key) + 1
+            if row > len(keys) or keys[row - 1] != key:
+                raise ValueError("a tree edge is not among the keys")
             for k in range(values.shape[1]):
                 acc[w, k] = acc[p, k] + values[row, k]
             done[w] = True
