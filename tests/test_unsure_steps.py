@@ -100,3 +100,48 @@ def test_a_step_kept_under_the_loop_bar_does_not_split_a_revisit(office):
     assert unsure[0] >= 3 and unsure[1] >= 3  # both sides of the step close
     assert sure[0] == 0  # the sure wrong step vetoes the loops before it
     assert unsure[2] > sure[2]
+
+
+def _chain(office, p_step: float, unsure: float | None) -> np.ndarray:
+    """The front end's estimate when the validator rejects every sequential match at
+    ``p_step`` and every loop."""
+    scans, _, odometry = office
+
+    def validate(edges: list[SlamEdge]) -> None:
+        for e in edges:
+            e.kept = e.validated = False
+            e.p_success = p_step if e.kind == "sequential" else 0.0
+
+    config = FrontEndConfig(
+        place_candidates=0,
+        place_candidates_drifted=0,
+        loops_per_keyframe=0,
+        turned_loops_per_keyframe=0,
+        final_sweep=False,
+        sequential_retry=False,
+        turned_overlap=None,
+        sequential_unsure=unsure,
+    )
+    front = FrontEnd(
+        scans, odometry, ScanMatcher(), validate, config, GraphConfig(), loop_bar=LOOP_BAR
+    )
+    front.run(progress=False)
+    return front.estimate.poses
+
+
+def _heading_drift(poses: np.ndarray, truth: np.ndarray) -> float:
+    """Degrees the last keyframe's heading is off once the first keyframes are aligned."""
+    ends = se2.between(poses[0], poses[-1]), se2.between(truth[0], truth[-1])
+    return math.degrees(abs(float(se2.wrap_angle(ends[0][2] - ends[1][2]))))
+
+
+def test_an_unsure_step_in_its_window_joins_the_keyframes_at_the_match(office):
+    _, truth, odometry = office
+    drift = _heading_drift(odometry, truth)
+    assert drift > 10.0  # the odometry turns 0.4° a step
+    # The validator unsure of every step (p 0.1, under its cut): the chain follows the
+    # matches, each in the smallest window around its odometry step.
+    assert _heading_drift(_chain(office, 0.1, 0.02), truth) < 0.2 * drift
+    # Sure they are wrong (p 0.01), or the rule off: the chain follows the odometry.
+    assert _heading_drift(_chain(office, 0.01, 0.02), truth) > 0.8 * drift
+    assert _heading_drift(_chain(office, 0.1, None), truth) > 0.8 * drift

@@ -85,6 +85,17 @@ class FrontEndConfig:
             0.106 → 0.092 m, Belgioioso 0.060 → 0.052 m). When it also checked matches
             turned out of the window, it took right matches out for odometry steps 9–14°
             off along the infinite corridor (0.059 → 0.32 m); translation alone, 0.059.
+        sequential_unsure: A sequential match the validator rejected at or above this
+            p(success) (unsure of it, not sure it is wrong) that lies in the smallest window
+            around its odometry step joins its keyframes at the match's pose, weighted as the
+            odometry a slide check confirmed (``drift_odometry_sigma_*``), not by the wide
+            fallback around the odometry's step (``slam.factors.fallback_edge``); None: every
+            rejected match falls back. A validator meets its unsure steps where it meets a
+            building it never saw: CSAIL with its fold model 0.085 → 0.060 m, with the
+            bundled model's logit lowered by 2 0.092 → 0.085 m; the bundled model 0.058 →
+            0.057 m (the infinite corridor 0.070 → 0.064, freiburg-campus 0.077 → 0.073).
+            0.02: below it the validator is sure, and a match it calls wrong within the window
+            is likelier the slide of a point-to-line fit than the step.
         sequential_wide_angular_deg: Half-width in heading of that wide window, degrees (in
             x and y it is the widest loop window). A 180° scanner turned by more than 90°
             keeps less than half of its view, too little to match; keyframes are at most
@@ -151,6 +162,7 @@ class FrontEndConfig:
     sequential_submap: int = 5
     sequential_retry: bool = True
     sequential_slide_check: bool = True
+    sequential_unsure: float | None = 0.02
     sequential_wide_angular_deg: float = 90.0
     sequential_retry_gain: float = 0.1
     submap_keyframes: int = 5

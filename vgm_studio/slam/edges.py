@@ -10,6 +10,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from vgm_studio.core import se2
 from vgm_studio.matching.matcher import MatchResult
 
 SlamEdgeKind = Literal["sequential", "loop"]
@@ -68,6 +69,17 @@ class SlamEdge:
     @property
     def estimate(self) -> NDArray[np.float64]:
         return np.asarray(self.match.estimate, dtype=np.float64)
+
+    def offset(self) -> tuple[float, float]:
+        """How far the match lies from its guess (a sequential edge's: the odometry's step),
+        as a search window measures it: the larger of x and y, metres, and the turn, radians."""
+        d = self.estimate - self.guess
+        return float(max(abs(d[0]), abs(d[1]))), abs(float(se2.wrap_angle(d[2])))
+
+    def within(self, linear: float, angular: float) -> bool:
+        """Whether the match lies in the window of these half-widths around its guess."""
+        moved, turn = self.offset()
+        return moved <= linear and turn <= angular
 
 
 # Sets ``p_success``, ``validated`` and ``kept`` on a batch of edges.

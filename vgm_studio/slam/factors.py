@@ -37,17 +37,38 @@ def odometry_edge(a: int, b: int, odometry: NDArray[np.float64], config: GraphCo
 def fallback_edge(
     edge: SlamEdge, odometry: NDArray[np.float64], graph: GraphConfig, front_end: FrontEndConfig
 ) -> GraphEdge:
-    """The odometry that joins the keyframes of a sequential edge left out of the graph.
+    """What joins the keyframes of a sequential edge whose match was left out of the graph.
 
-    Wide (``graph.odometry_sigma_*``) where the validator rejected the match: there the
-    odometry disagreed with a scan match, and is often far off. Narrow
-    (``front_end.drift_odometry_sigma_*``) where the slide check took a kept match out: a
-    match across two steps confirmed the odometry there, and a wide step would leave the graph
-    unsure for nothing.
+    - The odometry, narrow (``front_end.drift_odometry_sigma_*``), where the slide check took
+      a kept match out: a match across two steps confirmed the odometry there, and a wide
+      step would leave the graph unsure for nothing.
+    - The match, at that narrow σ, where the validator was unsure of it
+      (``front_end.sequential_unsure``) and it lies in the smallest window around the
+      odometry's step: the wheels vouch for the neighbourhood, the scans for the pose in it.
+      A validator that never saw the building doubts many right steps, and the wide
+      odometry in their place lets the chain drift between its loops.
+    - Else the odometry, wide (``graph.odometry_sigma_*``): the validator was sure the match
+      is wrong, or the match moved out of the window, and the odometry is often far off
+      where a scan match disagrees with it.
     """
+    narrow = narrow_odometry(graph, front_end)
     if edge.consistency == "rejected":
-        graph = narrow_odometry(graph, front_end)
+        return odometry_edge(edge.a, edge.b, odometry, narrow)
+    if _unsure_in_window(edge, front_end):
+        step = odometry_edge(edge.a, edge.b, odometry, narrow)
+        return dataclasses.replace(step, measurement=edge.estimate)
     return odometry_edge(edge.a, edge.b, odometry, graph)
+
+
+def _unsure_in_window(edge: SlamEdge, front_end: FrontEndConfig) -> bool:
+    floor = front_end.sequential_unsure
+    return (
+        floor is not None
+        and edge.kind == "sequential"
+        and edge.match.covariance is not None
+        and edge.p_success >= floor
+        and edge.within(front_end.window_linear[0], math.radians(front_end.window_angular_deg[0]))
+    )
 
 
 def narrow_odometry(graph: GraphConfig, front_end: FrontEndConfig) -> GraphConfig:

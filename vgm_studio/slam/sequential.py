@@ -131,13 +131,12 @@ class SequentialMatcher:
         them, and a match turned out of the window is one whose odometry turned wrong (the
         infinite corridor's keyframe 863: the odometry 14° off, the match right, and the match
         across two steps, in a corridor, nearer the odometry)."""
-        linear, _ = _offset(edge)
+        linear, _ = edge.offset()
         return linear > self._small_window.linear
 
     def inside(self, edge: SlamEdge) -> bool:
         """Whether a match lies in the smallest window around its odometry step."""
-        linear, turn = _offset(edge)
-        return linear <= self._small_window.linear and turn <= self._small_window.angular
+        return edge.within(self._small_window.linear, self._small_window.angular)
 
     def retry(
         self, edges: list[SlamEdge], validate: Validate, loop_bar: float | None = None
@@ -276,13 +275,6 @@ class SequentialMatcher:
             if far.covariance is not None and far.inlier_ratio >= bar:
                 best, bar = far, far.inlier_ratio
         return best
-
-
-def _offset(edge: SlamEdge) -> tuple[float, float]:
-    """How far a match lies from its odometry step, as a search window measures it: the
-    larger of x and y, metres, and the turn, radians."""
-    d = edge.estimate - edge.guess
-    return float(max(abs(d[0]), abs(d[1]))), abs(float(se2.wrap_angle(d[2])))
 
 
 def _two_steps(
