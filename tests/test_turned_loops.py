@@ -107,11 +107,5 @@ def test_a_run_keeps_right_turned_loops_the_validator_rejected_on_their_overlap(
     assert (np.hypot(errors[:, 0], errors[:, 1]) < 0.05).sum() >= 3
     measured = [e for e in loops if not math.isnan(e.overlap)]
     assert len(measured) > len(kept)  # some turned loops fell short and stayed out
-    # Judged only where the window spanned the drift; turned loops searched in a window
-    # clamped smaller stay the network's.
-    assert all(e.covered for e in measured)
-    clamped = run(dataclasses.replace(config, window_linear=(0.3, 0.6), drift_sigma_xy=0.05))
-    uncovered = [e for e in clamped if not e.covered and is_turned(e, 60.0)]
-    assert uncovered and all(math.isnan(e.overlap) and not e.kept for e in uncovered)
     off = dataclasses.replace(config, turned_overlap=None)
     assert not any(e.kept for e in run(off))

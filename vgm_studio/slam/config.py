@@ -122,8 +122,7 @@ class FrontEndConfig:
             share little more than its side walls, so the network, which judges the two
             scans, cannot tell a right turned loop from a wrong one (ROC AUC 0.64–0.70 on
             FHW's and CSAIL's turned loops), while the two local maps overlap where the
-            loop is right (AUC 0.94–0.97 on FHW, CSAIL and Belgioioso). Only where the loop's window
-            spanned the drift (``FrontEnd._judge_turned``).
+            loop is right (AUC 0.94–0.97 on FHW, CSAIL and Belgioioso).
         block: Keyframes added between two updates of the running estimate: the validator
             and the incremental solver work on whole blocks.
         final_sweep: After the last block, search once more, from the final estimate, the

@@ -50,8 +50,6 @@ class SlamEdge:
             where not measured.
         group: The consistency check the loop was judged in (loops checked together share
             it, numbered from 0 in the order the run checked them); None where unchecked.
-        covered: The loop's search window spanned three σ of where b may be
-            (``Candidate.covers``); False where it was clamped smaller than the drift.
     """
 
     kind: SlamEdgeKind
@@ -67,7 +65,6 @@ class SlamEdge:
     consistency: Consistency = "not-checked"
     overlap: float = math.nan
     group: int | None = None
-    covered: bool = True
 
     @property
     def estimate(self) -> NDArray[np.float64]:

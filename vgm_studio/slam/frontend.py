@@ -236,13 +236,7 @@ class FrontEnd:
         (``FrontEndConfig.turned_overlap``, ``slam.turned``); the consistency check then asks
         them for support like place loops.
 
-        Window loops only, and only where the window spans the drift (``Candidate.covers``):
-        the overlap is read at the estimate, which must know where b is. Where the window
-        was clamped smaller, the estimate may have slid along a corridor, and a periodic
-        corridor overlaps itself one period along: the infinite corridor, with a validator
-        made unsure (its logit 2 lower) keeping fewer loops to hold the estimate, kept 14
-        turned aliases 9 m along and ended 0.417 m off; judged only where covered, 0.061 m.
-        A place loop
+        Window loops only: the window is where the estimate says b may be. A place loop
         comes from looks alone, and a corridor seen from both ends looks like any other
         stretch of it: on the infinite corridor 33 of the 48 turned place loops that
         overlapped were 2 m or more off (median 15 m), against 1 of 279 window loops.
@@ -256,7 +250,7 @@ class FrontEnd:
             searched = e.source in WINDOW_SOURCES or e.injected
             if e.kept or not searched or e.match.covariance is None:
                 continue
-            if not e.covered or not is_turned(e, cfg.loop_max_angle_deg):
+            if not is_turned(e, cfg.loop_max_angle_deg):
                 continue
             submap = self._submap(e.a, e.b)
             e.overlap = trail_overlap(e, submap, self.scans, poses, cfg.submap_keyframes, match)
@@ -317,16 +311,7 @@ class FrontEnd:
                 far = self.loop_matcher.match(submap, target, scan, c.guess, wide, floor)
                 if (far.score or 0.0) > bar:
                     result = far
-        return SlamEdge(
-            "loop",
-            c.a,
-            c.b,
-            c.guess,
-            result,
-            c.source == "injected",
-            source=c.source,
-            covered=c.covers,
-        )
+        return SlamEdge("loop", c.a, c.b, c.guess, result, c.source == "injected", source=c.source)
 
     def _submap_key(self, a: int, b: int) -> tuple[int, int, int]:
         # Keyframes near b would match b trivially; the submap stays well before it.
