@@ -93,9 +93,10 @@ class FrontEndConfig:
             rejected match falls back. A validator meets its unsure steps where it meets a
             building it never saw: CSAIL with its fold model 0.085 → 0.060 m, with the
             bundled model's logit lowered by 2 0.092 → 0.085 m; the bundled model 0.058 →
-            0.057 m (the infinite corridor 0.070 → 0.064, freiburg-campus 0.077 → 0.073).
-            0.02: below it the validator is sure, and a match it calls wrong within the window
-            is likelier the slide of a point-to-line fit than the step.
+            0.057 m (the infinite corridor 0.073 → 0.064, freiburg-campus 0.074 → 0.073,
+            Örebro 0.054 → 0.057).
+            0.02 is where ``SecondLook``'s unsure band begins: below it the validator is sure
+            the match is wrong, and the step goes to the odometry.
         sequential_wide_angular_deg: Half-width in heading of that wide window, degrees (in
             x and y it is the widest loop window). A 180° scanner turned by more than 90°
             keeps less than half of its view, too little to match; keyframes are at most
