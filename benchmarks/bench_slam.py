@@ -128,7 +128,8 @@ def cautious_checkpoint(model: Path | None, shift: float) -> Path:
     build/slam/cautious: both heads' output biases lowered, so the eval logit, their mean, is.
 
     Raises:
-        SystemExit: The checkpoint has no such heads (not a ``vgmnet`` of this layout).
+        SystemExit: The file is not a checkpoint, or has no such heads (not a ``vgmnet`` of
+            this layout).
     """
     import torch
 
@@ -136,8 +137,11 @@ def cautious_checkpoint(model: Path | None, shift: float) -> Path:
 
     source = model or BUNDLED_MODEL
     out = OUT / "cautious" / f"{source.stem}-shift{shift:g}.pt"
-    checkpoint = torch.load(source, map_location="cpu", weights_only=False)
-    weights = checkpoint["state_dict"]
+    try:
+        checkpoint = torch.load(source, map_location="cpu", weights_only=False)
+        weights = checkpoint["state_dict"]
+    except Exception as exc:  # any unreadable file: say which, not a traceback
+        raise SystemExit(f"--cautious: {source}: not a checkpoint ({exc})") from None
     heads = [k for k in ("head.mlp.3.bias", "blind.mlp.3.bias") if k in weights]
     if "head.mlp.3.bias" not in heads:
         raise SystemExit(f"--cautious: {source}: no output head.mlp.3.bias to lower")
