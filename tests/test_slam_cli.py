@@ -201,6 +201,9 @@ def test_recording_reads_back_with_every_entity(runs):
     assert sum(e["source"] == "injected" for e in loops) == FALSE_LOOPS
     assert all(e["consistency"] == "not-checked" for e in loops if e["validator"] == "rejected")
     assert sum(e["validator"] == "kept" for e in loops) == doc["loops_validator_kept"]
+    at_match = [e for e in doc["edges"] if e["at_match"]]
+    assert len(at_match) == doc["sequential_at_match"]
+    assert all(e["kind"] == "sequential" and not e["kept"] for e in at_match)
     rejected_seq = doc["edges_rejected"] - (doc["loops_total"] - doc["loops_kept"])
     images = sum(c.to_record_batch().num_rows for c in chunks if c.entity_path == "/inspector/vgm")
     assert images == doc["loops_total"] + rejected_seq

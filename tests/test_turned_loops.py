@@ -107,5 +107,11 @@ def test_a_run_keeps_right_turned_loops_the_validator_rejected_on_their_overlap(
     assert (np.hypot(errors[:, 0], errors[:, 1]) < 0.05).sum() >= 3
     measured = [e for e in loops if not math.isnan(e.overlap)]
     assert len(measured) > len(kept)  # some turned loops fell short and stayed out
+    # Judged only where the estimate knows roughly where b is: with the drift widened, turned
+    # loops whose three σ exceed the reach stay the network's.
+    far = run(dataclasses.replace(config, drift_sigma_xy=0.05, turned_max_reach=1.0))
+    beyond = [e for e in far if is_turned(e, 60.0) and e.reach > 1.0]
+    assert beyond and all(math.isnan(e.overlap) and not e.kept for e in beyond)
+    assert any(not math.isnan(e.overlap) for e in far if e.reach <= 1.0)
     off = dataclasses.replace(config, turned_overlap=None)
     assert not any(e.kept for e in run(off))

@@ -20,10 +20,11 @@ from vgm_studio.core import se2
 from vgm_studio.datasets import open_log
 from vgm_studio.graph.config import GraphConfig
 from vgm_studio.matching.candidates import select_keyframes
-from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.matching.matcher import MatchResult, ScanMatcher
 from vgm_studio.simulation.simulate import SimConfig, simulate
 from vgm_studio.slam.config import FrontEndConfig
 from vgm_studio.slam.edges import SlamEdge
+from vgm_studio.slam.factors import fallback_edge, held_step, narrow_odometry, odometry_edge
 from vgm_studio.slam.frontend import FrontEnd
 
 LOOP_BAR = 0.8
@@ -145,3 +146,86 @@ def test_an_unsure_step_in_its_window_joins_the_keyframes_at_the_match(office):
     # Sure they are wrong (p 0.01), or the rule off: the chain follows the odometry.
     assert _heading_drift(_chain(office, 0.01, 0.02), truth) > 0.8 * drift
     assert _heading_drift(_chain(office, 0.1, None), truth) > 0.8 * drift
+
+
+def _rejected_step(p: float, moved: tuple[float, float, float], **fields) -> SlamEdge:
+    guess = np.array([0.5, 0.0, 0.0])
+    estimate = guess + np.array(moved)
+    covariance = fields.pop("covariance", np.eye(3) * 1e-4)
+    match = MatchResult(estimate, 3, True, 0.9, 0.01, covariance, estimate)
+    return SlamEdge(
+        "sequential", 0, 1, guess, match, p_success=p, kept=False, validated=False, **fields
+    )
+
+
+def test_a_rejected_step_joins_at_its_match_only_where_the_validator_was_unsure():
+    odometry = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0]])
+    graph, front = GraphConfig(), FrontEndConfig()
+    wide = odometry_edge(0, 1, odometry, graph)
+    narrow = odometry_edge(0, 1, odometry, narrow_odometry(graph, front))
+    assert np.all(np.diag(narrow.covariance) < np.diag(wide.covariance))
+
+    unsure = _rejected_step(0.1, (0.1, -0.05, math.radians(3.0)))
+    factor = fallback_edge(unsure, odometry, graph, front)
+    np.testing.assert_allclose(factor.measurement, unsure.estimate)
+    np.testing.assert_allclose(factor.covariance, narrow.covariance)
+    np.testing.assert_allclose(held_step(unsure, front), unsure.estimate)
+
+    to_the_odometry = [
+        _rejected_step(0.01, (0.1, 0.0, 0.0)),  # the validator is sure it is wrong
+        _rejected_step(math.nan, (0.1, 0.0, 0.0)),  # no p at all
+        _rejected_step(0.1, (0.35, 0.0, 0.0)),  # slid out of the 0.3 m window
+        _rejected_step(0.1, (0.0, 0.0, math.radians(12.0))),  # turned out of its 10°
+        _rejected_step(0.1, (0.1, 0.0, 0.0), covariance=None),  # a failed match
+        _rejected_step(0.1, (0.1, 0.0, 0.0), wide_kept=True),  # a wide match says otherwise
+    ]
+    for step in to_the_odometry:
+        factor = fallback_edge(step, odometry, graph, front)
+        np.testing.assert_allclose(factor.measurement, odometry[1])
+        np.testing.assert_allclose(factor.covariance, wide.covariance)
+        np.testing.assert_allclose(held_step(step, front), step.guess)
+    # Taken out by the slide check: its odometry, narrow, as before.
+    slid = _rejected_step(0.9, (0.1, 0.0, 0.0), consistency="rejected")
+    factor = fallback_edge(slid, odometry, graph, front)
+    np.testing.assert_allclose(factor.measurement, odometry[1])
+    np.testing.assert_allclose(factor.covariance, narrow.covariance)
+    # Off: every rejected step to the wide odometry.
+    off = dataclasses.replace(front, sequential_unsure=None)
+    factor = fallback_edge(unsure, odometry, graph, off)
+    np.testing.assert_allclose(factor.covariance, wide.covariance)
+
+
+def test_a_step_whose_wide_match_was_kept_is_not_joined_at_its_own_match(office):
+    """The odometry 25° off at one step: the small window holds only a wrong match (p 0.1),
+    the wide retry finds the right one (p 0.5, kept, but under the loop bar and outside the
+    window, so not believed). The wrong match must not go in at the odometry's narrow σ."""
+    scans, truth, _ = office
+    bad = 40
+    odometry = truth[:1].copy()
+    for k, step in enumerate(se2.between(truth[:-1], truth[1:])):
+        if k + 1 == bad:
+            step = se2.compose(step, np.array([0.0, 0.0, math.radians(25.0)]))
+        odometry = np.vstack([odometry, se2.compose(odometry[-1], step)])
+
+    def validate(edges: list[SlamEdge]) -> None:
+        for e in edges:
+            right = e.kind == "sequential" and _right(e, truth)
+            e.kept = e.validated = right
+            e.p_success = 0.5 if right else (0.1 if e.kind == "sequential" else 0.0)
+
+    config = FrontEndConfig(
+        place_candidates=0,
+        place_candidates_drifted=0,
+        loops_per_keyframe=0,
+        turned_loops_per_keyframe=0,
+        final_sweep=False,
+        turned_overlap=None,
+    )
+    front = FrontEnd(
+        scans[:60], odometry[:60], ScanMatcher(), validate, config, GraphConfig(), loop_bar=LOOP_BAR
+    )
+    step = next(e for e in front.run(progress=False) if e.kind == "sequential" and e.b == bad)
+    assert not step.kept and step.wide_kept
+    assert not _right(step, truth) and step.within(0.3, math.radians(10.0))
+    held = se2.between(front.estimate.poses[bad - 1], front.estimate.poses[bad])
+    np.testing.assert_allclose(held, se2.between(odometry[bad - 1], odometry[bad]), atol=1e-6)

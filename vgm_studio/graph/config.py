@@ -22,7 +22,9 @@ class GraphConfig:
             from residuals alone is millimetres, far more certain than a scan pair is.
         min_sigma_theta_deg: Floor on its rotational σ, degrees.
         odometry_sigma_xy: σ of the odometry fallback that joins keyframes whose sequential
-            edge was rejected, metres per metre travelled (plus ``min_sigma_xy``). Wide on
+            edge was rejected (a match the validator was only unsure of joins them at the
+            narrower ``FrontEndConfig.drift_odometry_sigma_*`` instead), metres per metre
+            travelled (plus ``min_sigma_xy``). Wide on
             purpose: the odometry goes in exactly where a scan match disagreed with it, and
             there it is often far off (CSAIL and Belgioioso: 11–47° at such steps). With a
             narrow σ the graph believes it, and the consistency check lets that belief

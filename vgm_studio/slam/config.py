@@ -59,7 +59,8 @@ class FrontEndConfig:
         drift_odometry_sigma_xy: How far the odometry of a rejected sequential step may be
             off, as the loop search sees it, metres per metre (the graph's own fallback,
             ``GraphConfig.odometry_sigma_xy``, is far wider); also the graph's σ of a step
-            whose odometry the slide check confirmed.
+            whose odometry the slide check confirmed, and of one joined at a match the
+            validator was only unsure of (``sequential_unsure``).
         drift_odometry_sigma_theta_deg: …and in heading, degrees.
         prefer_estimate: A loop is first matched in the smallest window around the estimate;
             the full window's pose replaces it only if it scores this much higher (relative):
@@ -124,6 +125,14 @@ class FrontEndConfig:
             scans, cannot tell a right turned loop from a wrong one (ROC AUC 0.64–0.70 on
             FHW's and CSAIL's turned loops), while the two local maps overlap where the
             loop is right (AUC 0.94–0.97 on FHW, CSAIL and Belgioioso).
+        turned_max_reach: …and only where three σ of where b may be relative to a (in x and
+            y, from the drift) is at most this, metres. Farther, the estimate may have slid
+            by more than a corridor's period, and a trail placed by it overlaps an alias as
+            well as the place: the infinite corridor with a validator made unsure (its logit
+            2 lower) kept 14 turned loops 9 m along and ended 0.417 m off, 0.058 m judged so.
+            Not at the widest window (3 m): a fold model on CSAIL, which never saw it, then
+            lost the right turned loops of its corridors' U-turns, 0.060 → 0.124 m (0.060
+            judged so).
         block: Keyframes added between two updates of the running estimate: the validator
             and the incremental solver work on whole blocks.
         final_sweep: After the last block, search once more, from the final estimate, the
@@ -171,6 +180,7 @@ class FrontEndConfig:
     loops_per_keyframe: int = 2
     turned_loops_per_keyframe: int = 1
     turned_overlap: float | None = 0.7
+    turned_max_reach: float = 6.0
     block: int = 25
     final_sweep: bool = True
     false_loops: int = 0

@@ -50,6 +50,14 @@ class SlamEdge:
             where not measured.
         group: The consistency check the loop was judged in (loops checked together share
             it, numbered from 0 in the order the run checked them); None where unchecked.
+        reach: A window loop's three σ of where b may be relative to a, metres
+            (``Candidate.reach``); NaN for the others.
+        wide_kept: A rejected sequential step whose match over the wide window the
+            validator kept, adopted or not (``SequentialMatcher.retry``): the step's own
+            match is then in doubt however unsure the validator was of it.
+        at_match: A rejected sequential step the graph joins at its match, at the odometry's
+            narrow σ, the validator having been only unsure of it
+            (``factors.joined_at_match``); still counted as rejected.
     """
 
     kind: SlamEdgeKind
@@ -65,6 +73,9 @@ class SlamEdge:
     consistency: Consistency = "not-checked"
     overlap: float = math.nan
     group: int | None = None
+    reach: float = math.nan
+    wide_kept: bool = False
+    at_match: bool = False
 
     @property
     def estimate(self) -> NDArray[np.float64]:

@@ -1,5 +1,6 @@
-"""How a run's edges become factors of the pose graph: a match at its own covariance, and the
-odometry that keeps the chain whole where a sequential match was left out."""
+"""How a run's edges become factors of the pose graph: a match at its own covariance, and what
+keeps the chain whole where a sequential match was left out (the odometry, or the match at the
+odometry's σ where the validator was only unsure of it)."""
 
 from __future__ import annotations
 
@@ -44,7 +45,9 @@ def fallback_edge(
       step would leave the graph unsure for nothing.
     - The match, at that narrow σ, where the validator was unsure of it
       (``front_end.sequential_unsure``) and it lies in the smallest window around the
-      odometry's step: the wheels vouch for the neighbourhood, the scans for the pose in it.
+      odometry's step, and no wide match the validator kept says the odometry is off
+      (``joined_at_match``): the wheels vouch for the neighbourhood, the scans for the pose
+      in it.
       A validator that never saw the building doubts many right steps, and the wide
       odometry in their place lets the chain drift between its loops.
     - Else the odometry, wide (``graph.odometry_sigma_*``): the validator was sure the match
@@ -54,21 +57,33 @@ def fallback_edge(
     narrow = narrow_odometry(graph, front_end)
     if edge.consistency == "rejected":
         return odometry_edge(edge.a, edge.b, odometry, narrow)
-    if _unsure_in_window(edge, front_end):
+    if joined_at_match(edge, front_end):
         step = odometry_edge(edge.a, edge.b, odometry, narrow)
         return dataclasses.replace(step, measurement=edge.estimate)
     return odometry_edge(edge.a, edge.b, odometry, graph)
 
 
-def _unsure_in_window(edge: SlamEdge, front_end: FrontEndConfig) -> bool:
+def joined_at_match(edge: SlamEdge, front_end: FrontEndConfig) -> bool:
+    """Whether a rejected sequential step joins its keyframes at its match (``fallback_edge``):
+    the validator unsure of it, the match in the smallest window around the odometry's step,
+    and no wide match the validator kept saying the odometry is off."""
     floor = front_end.sequential_unsure
     return (
         floor is not None
         and edge.kind == "sequential"
+        and not edge.kept
+        and edge.consistency != "rejected"
+        and not edge.wide_kept
         and edge.match.covariance is not None
         and edge.p_success >= floor
         and edge.within(front_end.window_linear[0], math.radians(front_end.window_angular_deg[0]))
     )
+
+
+def held_step(edge: SlamEdge, front_end: FrontEndConfig) -> NDArray[np.float64]:
+    """A sequential step as the graph will hold it: the match where it went in or joins the
+    keyframes at its match, else the odometry's step."""
+    return edge.estimate if edge.kept or joined_at_match(edge, front_end) else edge.guess
 
 
 def narrow_odometry(graph: GraphConfig, front_end: FrontEndConfig) -> GraphConfig:

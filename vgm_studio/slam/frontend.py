@@ -34,7 +34,13 @@ from vgm_studio.progress import counter
 from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
 from vgm_studio.slam.consistency import Loop, consistent
 from vgm_studio.slam.edges import WINDOW_SOURCES, SlamEdge, SlamEdgeKind, Validate
-from vgm_studio.slam.factors import fallback_edge, graph_edge, narrow_odometry, odometry_edge
+from vgm_studio.slam.factors import (
+    fallback_edge,
+    graph_edge,
+    joined_at_match,
+    narrow_odometry,
+    odometry_edge,
+)
 from vgm_studio.slam.loop_search import (
     Candidate,
     false_loop_pairs,
@@ -167,6 +173,7 @@ class FrontEnd:
                 factor = graph_edge(e, self.graph)
             else:
                 factor = fallback_edge(e, odo, self.graph, self.config)
+                e.at_match = joined_at_match(e, self.config)
             self.estimate.add_keyframe(se2.compose(self.estimate.poses[e.a], factor.measurement))
             self.estimate.add_edge(factor)
             self._uncertainty.add(self._drift(e) if e.kept else self._drift_odometry(e))
@@ -236,7 +243,10 @@ class FrontEnd:
         (``FrontEndConfig.turned_overlap``, ``slam.turned``); the consistency check then asks
         them for support like place loops.
 
-        Window loops only: the window is where the estimate says b may be. A place loop
+        Window loops only, and only where the estimate knows roughly where b is
+        (``FrontEndConfig.turned_max_reach``): the overlap is read with b's trail placed by
+        the estimate, and where that may have slid far along a corridor, a periodic
+        corridor overlaps itself one period along. A place loop
         comes from looks alone, and a corridor seen from both ends looks like any other
         stretch of it: on the infinite corridor 33 of the 48 turned place loops that
         overlapped were 2 m or more off (median 15 m), against 1 of 279 window loops.
@@ -250,7 +260,7 @@ class FrontEnd:
             searched = e.source in WINDOW_SOURCES or e.injected
             if e.kept or not searched or e.match.covariance is None:
                 continue
-            if not is_turned(e, cfg.loop_max_angle_deg):
+            if not is_turned(e, cfg.loop_max_angle_deg) or e.reach > cfg.turned_max_reach:
                 continue
             submap = self._submap(e.a, e.b)
             e.overlap = trail_overlap(e, submap, self.scans, poses, cfg.submap_keyframes, match)
@@ -311,7 +321,8 @@ class FrontEnd:
                 far = self.loop_matcher.match(submap, target, scan, c.guess, wide, floor)
                 if (far.score or 0.0) > bar:
                     result = far
-        return SlamEdge("loop", c.a, c.b, c.guess, result, c.source == "injected", source=c.source)
+        injected = c.source == "injected"
+        return SlamEdge("loop", c.a, c.b, c.guess, result, injected, source=c.source, reach=c.reach)
 
     def _submap_key(self, a: int, b: int) -> tuple[int, int, int]:
         # Keyframes near b would match b trivially; the submap stays well before it.

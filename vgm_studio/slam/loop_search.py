@@ -54,6 +54,8 @@ class Candidate:
         covers: The window spans three σ of where b may be relative to a. A window clamped
             smaller (the graph has drifted farther than a search can afford) may miss the
             place, so place recognition looks too.
+        reach: Three σ of where b may be relative to a, in x and y, metres (window
+            candidates; NaN for the others).
     """
 
     a: int
@@ -63,6 +65,7 @@ class Candidate:
     linear: float
     angular: float
     covers: bool = True
+    reach: float = math.nan
 
 
 def _clamp(value: float, bounds: tuple[float, float]) -> float:
@@ -174,7 +177,8 @@ def _window_of(
         linear = _clamp(reach, config.window_linear)
         angular = _clamp(turn_deg, (lo_deg, hi_deg))
         covers = reach <= linear and turn_deg <= angular
-        out.append(Candidate(int(a), b, "window", offset[a], linear, math.radians(angular), covers))
+        angle = math.radians(angular)
+        out.append(Candidate(int(a), b, "window", offset[a], linear, angle, covers, reach))
     return out
 
 

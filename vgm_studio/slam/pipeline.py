@@ -48,8 +48,9 @@ class SlamResult:
         seconds: Wall time per stage.
         isam2_restarts: 1 when the running estimate had to rebuild iSAM2 with QR (see
             ``RunningEstimate.update``), else 0.
-        after_edges: The factors ``after`` was optimised over: the kept edges and the odometry
-            that stands in for each rejected sequential one (a g2o export writes these).
+        after_edges: The factors ``after`` was optimised over: the kept edges and what stands
+            in for each rejected sequential one, its odometry or, where the validator was only
+            unsure, its match (``factors.fallback_edge``; a g2o export writes these).
         given: (K, 3) the keyframe poses an audited graph came with: its maps, recording and
             relation errors then start from ``input``, not the odometry.
         loop_bar: The p(success) a loop was held to (``EdgeValidator.loop_bar``: the highest

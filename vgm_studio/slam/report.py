@@ -91,6 +91,7 @@ class EdgeCounts:
     by_source: dict[str, int] = field(default_factory=dict)
     validated: int = 0
     consistency_rejected: int = 0
+    at_match: int = 0
 
     @classmethod
     def of(cls, result: SlamResult) -> EdgeCounts:
@@ -107,6 +108,7 @@ class EdgeCounts:
             by_source={s: sum(e.source == s for e in loops) for s in _SOURCES},
             validated=sum(e.validated for e in loops),
             consistency_rejected=sum(e.consistency == "rejected" for e in loops),
+            at_match=sum(e.at_match for e in result.edges),
         )
 
 
@@ -153,6 +155,7 @@ def summary(
             "loops_by_source": counts.by_source,
             "loops_validator_kept": counts.validated,
             "loops_consistency_rejected": counts.consistency_rejected,
+            "sequential_at_match": counts.at_match,
             "gnc_rejected": {
                 "before": int(np.sum(result.before.weights < 0.5)),
                 "after": int(np.sum(result.after.weights < 0.5)),
@@ -185,6 +188,7 @@ def edge_json(edge: SlamEdge) -> dict[str, Any]:
         "consistency": edge.consistency,
         "overlap": edge.overlap,
         "kept": edge.kept,
+        "at_match": edge.at_match,
         "estimate": [float(v) for v in edge.estimate],
     }
 

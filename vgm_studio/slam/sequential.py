@@ -24,6 +24,7 @@ from vgm_studio.matching.matcher import MatchResult, ScanMatcher
 from vgm_studio.matching.submap import Submap
 from vgm_studio.slam.config import FrontEndConfig
 from vgm_studio.slam.edges import SlamEdge, Validate
+from vgm_studio.slam.factors import held_step
 
 Poses = dict[int, NDArray[np.float64]]
 
@@ -93,7 +94,8 @@ class SequentialMatcher:
         word stays in ``validated``).
 
         The neighbour is a kept match inside its window where there is one, else one the
-        validator rejected, which the graph joins by its odometry step; without that, a slid
+        validator rejected, which the graph joins by its odometry step (or its match, where the
+        validator was only unsure: ``factors.held_step``); without that, a slid
         match between two rejected steps had no referee (freiburg-campus keyframe 177: the
         pairwise matcher's answer 1.25 m off at p 0.35, with the wheels 0.18 m off; 0.101 →
         0.092 m).
@@ -117,7 +119,7 @@ class SequentialMatcher:
                 continue
             a, c = edges[min(i, j)].a, edges[max(i, j)].b
             # The neighbour's step as the graph will hold it.
-            theirs = edges[j].estimate if edges[j].kept else edges[j].guess
+            theirs = held_step(edges[j], self.config)
             matched = _two_steps(i, j, e.estimate, theirs)
             odometry = _two_steps(i, j, e.guess, theirs)
             # The block's submaps still hold as matched: each placed by the matches before it.
@@ -170,6 +172,8 @@ class SequentialMatcher:
         if not retried:
             return
         validate(list(retried.values()))
+        for i, r in retried.items():
+            edges[i].wide_kept = r.kept
         kept = {i: r for i, r in retried.items() if r.kept and self._believed(r, loop_bar)}
         while lone := [i for i in kept if not self._bridged(i, edges, kept, poses)]:
             for i in lone:
@@ -202,7 +206,7 @@ class SequentialMatcher:
             a, c = edges[min(i, j)].a, edges[max(i, j)].b
             # The neighbour's step as the graph will hold it.
             if self._odometry_neighbour(j, edges, kept):
-                theirs = edges[j].guess
+                theirs = held_step(edges[j], self.config)
             else:
                 theirs = kept[j].estimate if j in kept else edges[j].estimate
             with_match = _two_steps(i, j, kept[i].estimate, theirs)
@@ -219,7 +223,8 @@ class SequentialMatcher:
 
     @staticmethod
     def _odometry_neighbour(j: int, edges: list[SlamEdge], kept: dict[int, SlamEdge]) -> bool:
-        """Whether step j exists and the graph will join it by its odometry."""
+        """Whether step j exists and stays rejected: the graph joins it by its odometry, or at
+        its match where the validator was only unsure (``factors.held_step``)."""
         return 0 <= j < len(edges) and not edges[j].kept and j not in kept
 
     def _across(
