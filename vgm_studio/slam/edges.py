@@ -53,11 +53,11 @@ class SlamEdge:
         reach: A window loop's three σ of where b may be relative to a, metres
             (``Candidate.reach``); NaN for the others.
         wide_kept: A rejected sequential step whose match over the wide window the
-            validator kept, adopted or not (``SequentialMatcher.retry``): the step's own
-            match is then in doubt however unsure the validator was of it.
-        at_match: A rejected sequential step the graph joins at its match, at the odometry's
-            narrow σ, the validator having been only unsure of it
-            (``factors.joined_at_match``); still counted as rejected.
+            validator kept, adopted or not (``SequentialMatcher.retry``): the odometry is
+            then in doubt as well as the step's own match (``factors.fallback_edge``).
+        at_match: A rejected sequential step the graph joins at its match, at an odometry's
+            σ, the validator having been only unsure of it (``factors.joined_at_match``);
+            still counted as rejected.
     """
 
     kind: SlamEdgeKind
