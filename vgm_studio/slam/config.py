@@ -93,9 +93,9 @@ class FrontEndConfig:
             fallback around the odometry's step (``slam.factors.fallback_edge``); None: every
             rejected match falls back. A validator meets its unsure steps where it meets a
             building it never saw: CSAIL with its fold model 0.085 → 0.060 m, with the
-            bundled model's logit lowered by 2 0.092 → 0.085 m; the bundled model 0.058 →
-            0.057 m (the infinite corridor 0.073 → 0.064, freiburg-campus 0.074 → 0.073,
-            Örebro 0.054 → 0.057).
+            bundled model's logit lowered by 2 0.092 → 0.084 m; the bundled model 0.058 →
+            0.057 m (the infinite corridor 0.073 → 0.063, freiburg-campus 0.074 → 0.071,
+            Örebro 0.054 → 0.055).
             0.02 is where ``SecondLook``'s unsure band begins: below it the validator is sure
             the match is wrong, and the step goes to the odometry.
         sequential_wide_angular_deg: Half-width in heading of that wide window, degrees (in
