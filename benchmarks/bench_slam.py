@@ -328,6 +328,8 @@ def main() -> None:
         "validator, its cut unchanged); the rows' JSON are named <row>-cautiousSHIFT.json.",
     )
     args = parser.parse_args()
+    if args.cautious is not None and not math.isfinite(args.cautious):
+        raise SystemExit(f"--cautious: {args.cautious} is not a finite shift of the logit")
     if args.model is not None and not args.model.is_file():
         raise SystemExit(f"--model: {args.model}: no such file")
     if args.held_out is not None and not args.held_out.is_dir():
