@@ -89,7 +89,8 @@ class FrontEndConfig:
         sequential_unsure: A sequential match the validator rejected at or above this
             p(success) (unsure of it, not sure it is wrong) that lies in the smallest window
             around its odometry step joins its keyframes at the match's pose, weighted as the
-            odometry a slide check confirmed (``drift_odometry_sigma_*``), not by the wide
+            odometry a slide check confirmed (``drift_odometry_sigma_*``; the wide σ where a
+            wide match the validator kept says the odometry is off), not by the wide
             fallback around the odometry's step (``slam.factors.fallback_edge``); None: every
             rejected match falls back. A validator meets its unsure steps where it meets a
             building it never saw: CSAIL with its fold model 0.085 → 0.060 m, with the
