@@ -38,11 +38,29 @@ def office(tmp_path_factory) -> tuple[list, np.ndarray, np.ndarray]:
     truth = np.array([s.reference for s in log.scans])
     keyframes = select_keyframes(truth, 0.5, 20.0)
     truth = truth[keyframes]
+    drift = np.tile([0.0, 0.0, math.radians(0.4)], (len(truth) - 1, 1))
+    return [log.scans[i] for i in keyframes], truth, _odometry(truth, drift)
+
+
+def _odometry(truth: np.ndarray, errors: np.ndarray) -> np.ndarray:
+    """The poses of an odometry whose step k (into pose k + 1) is off by ``errors[k]``."""
     odometry = truth[:1].copy()
-    drift = np.array([0.0, 0.0, math.radians(0.4)])
-    for step in se2.between(truth[:-1], truth[1:]):
-        odometry = np.vstack([odometry, se2.compose(odometry[-1], se2.compose(step, drift))])
-    return [log.scans[i] for i in keyframes], truth, odometry
+    for step, error in zip(se2.between(truth[:-1], truth[1:]), errors, strict=True):
+        odometry = np.vstack([odometry, se2.compose(odometry[-1], se2.compose(step, error))])
+    return odometry
+
+
+def _chain_only(**settings) -> FrontEndConfig:
+    """A front end that searches no loop: the sequential chain alone."""
+    return FrontEndConfig(
+        place_candidates=0,
+        place_candidates_drifted=0,
+        loops_per_keyframe=0,
+        turned_loops_per_keyframe=0,
+        final_sweep=False,
+        turned_overlap=None,
+        **settings,
+    )
 
 
 def _right(edge: SlamEdge, truth: np.ndarray) -> bool:
@@ -113,16 +131,7 @@ def _chain(office, p_step: float, unsure: float | None) -> np.ndarray:
             e.kept = e.validated = False
             e.p_success = p_step if e.kind == "sequential" else 0.0
 
-    config = FrontEndConfig(
-        place_candidates=0,
-        place_candidates_drifted=0,
-        loops_per_keyframe=0,
-        turned_loops_per_keyframe=0,
-        final_sweep=False,
-        sequential_retry=False,
-        turned_overlap=None,
-        sequential_unsure=unsure,
-    )
+    config = _chain_only(sequential_retry=False, sequential_unsure=unsure)
     front = FrontEnd(
         scans, odometry, ScanMatcher(), validate, config, GraphConfig(), loop_bar=LOOP_BAR
     )
@@ -206,11 +215,9 @@ def test_a_step_whose_wide_match_was_kept_is_held_loosely(office):
     which would let the graph veto the loops that mend it."""
     scans, truth, _ = office
     bad = 40
-    odometry = truth[:1].copy()
-    for k, step in enumerate(se2.between(truth[:-1], truth[1:])):
-        if k + 1 == bad:
-            step = se2.compose(step, np.array([0.0, 0.0, math.radians(25.0)]))
-        odometry = np.vstack([odometry, se2.compose(odometry[-1], step)])
+    kick = np.zeros((len(truth) - 1, 3))
+    kick[bad - 1, 2] = math.radians(25.0)
+    odometry = _odometry(truth, kick)
 
     def validate(edges: list[SlamEdge]) -> None:
         for e in edges:
@@ -218,14 +225,7 @@ def test_a_step_whose_wide_match_was_kept_is_held_loosely(office):
             e.kept = e.validated = right
             e.p_success = 0.5 if right else (0.1 if e.kind == "sequential" else 0.0)
 
-    config = FrontEndConfig(
-        place_candidates=0,
-        place_candidates_drifted=0,
-        loops_per_keyframe=0,
-        turned_loops_per_keyframe=0,
-        final_sweep=False,
-        turned_overlap=None,
-    )
+    config = _chain_only()
     front = FrontEnd(
         scans[:60], odometry[:60], ScanMatcher(), validate, config, GraphConfig(), loop_bar=LOOP_BAR
     )
