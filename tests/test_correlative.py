@@ -187,6 +187,18 @@ def test_match_figures_are_those_of_the_pair(office):
     assert got.kiss_moved > 0.5
     fig = got.figures()
     assert fig["score"] == got.score and len(fig["kiss_estimate"]) == 3
+    # In an office the match is pinned: its score's surface spreads by centimetres, and a
+    # guess a metre off keeps little of the match's score.
+    spread = np.asarray(got.spread)
+    assert spread.shape == (3, 3) and np.all(np.linalg.eigvalsh(spread) >= 0)
+    assert np.sqrt(spread[0, 0]) < 0.05 and np.sqrt(spread[1, 1]) < 0.05
+    assert got.guess_share is not None and got.guess_share < 0.5
+    # Started at the truth, the guess keeps nearly all of it.
+    again = LoopMatcher().match(
+        submap_around(office, a), office.scans[a], office.scans[b], truth, SearchWindow(2.0, 0.3)
+    )
+    assert again.guess_share is not None and again.guess_share > 0.9
+    assert "spread" not in fig and "guess_share" not in fig  # the edges file's figures
 
 
 def test_no_points_or_no_pose_above_min_score_returns_the_guess(office):

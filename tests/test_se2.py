@@ -46,3 +46,22 @@ def test_one_pose_gives_the_bits_a_stack_gives():
     # A heading that is not finite is no number to turn by: NaN, as for a stack.
     with np.errstate(invalid="ignore"):
         assert np.isnan(se2.compose([0, 0, np.inf], [1, 0, 0])).all()
+
+
+def test_covariance_in_own_frame_is_what_gtsam_measures():
+    # A matcher's spread of (x, y, θ) in the target's frame, sampled and moved into gtsam's
+    # local coordinates of the measured pose, must have the covariance the function says.
+    import gtsam
+
+    rng = np.random.default_rng(5)
+    z = np.array([2.0, -1.0, 1.2])
+    searched = np.array([[4e-4, 5e-5, 2e-5], [5e-5, 1e-5, 0.0], [2e-5, 0.0, 1e-5]])
+    deltas = rng.multivariate_normal(np.zeros(3), searched, size=20000)
+    measured = gtsam.Pose2(*z)
+    local = np.array([measured.localCoordinates(gtsam.Pose2(*(z + d))) for d in deltas])
+    want = np.cov(local.T)
+    got = se2.covariance_in_own_frame(searched, z[2])
+    np.testing.assert_allclose(got, want, atol=1e-5)
+    # Long along the target's x, the loop turned by 90°: long along its own y.
+    turned = se2.covariance_in_own_frame(np.diag([1.0, 0.01, 0.001]), np.pi / 2)
+    np.testing.assert_allclose(np.diag(turned), [0.01, 1.0, 0.001], atol=1e-12)

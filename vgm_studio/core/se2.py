@@ -88,3 +88,18 @@ def pose_error(reference: ArrayLike, estimate: ArrayLike) -> tuple[float, float]
     """Returns (|e_xy| in metres, |e_θ| in radians) of e = reference⁻¹ ∘ estimate."""
     e = between(reference, estimate)
     return float(np.hypot(e[0], e[1])), float(abs(e[2]))
+
+
+def covariance_in_own_frame(covariance: ArrayLike, theta: float) -> NDArray[np.float64]:
+    """A pose's (x, y, θ) covariance given in its parent's frame, turned into the pose's own
+    frame, where gtsam's Pose2 factors measure their error (translation along the pose's own
+    axes, to first order).
+
+    A matcher varies (x, y) along the frame it searches in, the target's. Along a corridor
+    its variance is long on one axis; a loop turned by 90° against its target would hold that
+    length across the corridor if read in the wrong frame.
+    """
+    c, s = math.cos(theta), math.sin(theta)
+    turn = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    out: NDArray[np.float64] = turn @ np.asarray(covariance, dtype=np.float64) @ turn.T
+    return out

@@ -39,6 +39,10 @@ class MatchResult:
         score: The loop matcher's correlative score (mean likelihood under the points at its
             grid pose, 0..1); None from this pairwise matcher. The loop matcher reports its grid
             pose, and how far that moved and turned from the guess, in the ``kiss_*`` fields.
+        spread: The loop matcher's covariance of its score's surface around the estimate
+            (``response.response_covariance``), in scan a's frame; None where not measured.
+        guess_share: The loop matcher's score at the guess over its score at the estimate:
+            how much of the match's support the guess keeps; None where not measured.
     """
 
     estimate: NDArray[np.float64]
@@ -51,12 +55,16 @@ class MatchResult:
     kiss_moved: float = 0.0
     kiss_turned: float = 0.0
     score: float | None = None
+    spread: NDArray[np.float64] | None = None
+    guess_share: float | None = None
 
     def figures(self) -> dict[str, Any]:
         """The quality figures as JSON-ready values."""
         # Field by field: ``asdict`` deep-copies every array, once per validated edge.
         d = {f.name: getattr(self, f.name) for f in fields(self)}
         d.pop("estimate")
+        d.pop("spread")
+        d.pop("guess_share")
         for key in ("covariance", "kiss_estimate"):
             if d[key] is not None:
                 d[key] = np.asarray(d[key]).tolist()

@@ -1,6 +1,7 @@
 """How a run's edges become factors of the pose graph: a match at its own covariance, and what
 keeps the chain whole where a sequential match was left out (the odometry, or the match at the
-odometry's σ where the validator was only unsure of it)."""
+odometry's σ where the validator was only unsure of it); and the narrower factors through which
+the loop search reads the chain's drift."""
 
 from __future__ import annotations
 
@@ -18,14 +19,56 @@ from vgm_studio.slam.edges import SlamEdge
 
 
 def graph_edge(edge: SlamEdge, config: GraphConfig) -> GraphEdge:
-    """The factor of a matched edge: its estimate, with the matcher's covariance floored."""
+    """The factor of a matched edge: its estimate, with the matcher's covariance, in b's
+    frame as the factor reads it (``matcher_covariance``), floored."""
     return GraphEdge(
         edge.a,
         edge.b,
         edge.estimate,
-        edge_covariance(edge.match.covariance, config),
+        edge_covariance(matcher_covariance(edge), config),
         known_inlier=edge.kind == "sequential",
     )
+
+
+def sequential_edge(
+    edge: SlamEdge, odometry: NDArray[np.float64], graph: GraphConfig, front_end: FrontEndConfig
+) -> GraphEdge:
+    """The factor of a kept sequential match: the match and its odometry step fused, each by
+    its information (the odometry at ``front_end.drift_odometry_sigma_*``), where
+    ``front_end.sequential_odometry`` asks for it; else the match alone."""
+    match = graph_edge(edge, graph)
+    if not front_end.sequential_odometry:
+        return match
+    step = odometry_edge(edge.a, edge.b, odometry, narrow_odometry(graph, front_end))
+    # The odometry's step seen from the match, in the match's own frame, as its factor reads
+    # errors; steps differ by centimetres and degrees, so the tangent is this difference.
+    gap = se2.between(match.measurement, step.measurement)
+    if abs(gap[2]) > 3.0 * math.radians(front_end.drift_odometry_sigma_theta_deg):
+        return match  # the odometry turned otherwise: its translation is in doubt too
+    share = edge.match.guess_share
+    if share is None or share < front_end.sequential_odometry_share:
+        return match  # the scans rule the odometry's step out
+    info_match = np.linalg.inv(match.covariance)
+    # The odometry's translation only: a heading bias of a few tenths of a degree a step, a
+    # share of it taken at every step, would bend the chain.
+    info_step = np.zeros((3, 3))
+    info_step[:2, :2] = np.linalg.inv(step.covariance[:2, :2])
+    cov = np.linalg.inv(info_match + info_step)
+    shift = cov @ info_step @ gap
+    fused = se2.compose(match.measurement, shift)
+    return GraphEdge(edge.a, edge.b, fused, 0.5 * (cov + cov.T), known_inlier=True)
+
+
+def matcher_covariance(edge: SlamEdge, spread: bool = True) -> NDArray[np.float64] | None:
+    """The matcher's covariance of a matched edge in b's own frame, where a factor measures
+    its error; None where the matcher gave none. The matcher gives it in a's frame, the one
+    it searched in. With ``spread``, the spread of its score's surface is added."""
+    cov = edge.match.covariance
+    if cov is None or not np.all(np.isfinite(cov)):
+        return None
+    if spread and edge.match.spread is not None:
+        cov = np.asarray(cov) + edge.match.spread
+    return se2.covariance_in_own_frame(cov, float(edge.estimate[2]))
 
 
 def odometry_edge(a: int, b: int, odometry: NDArray[np.float64], config: GraphConfig) -> GraphEdge:
@@ -62,7 +105,8 @@ def fallback_edge(
         return odometry_edge(edge.a, edge.b, odometry, narrow)
     if joined_at_match(edge, front_end):
         step = odometry_edge(edge.a, edge.b, odometry, graph if edge.wide_kept else narrow)
-        return dataclasses.replace(step, measurement=edge.estimate)
+        fused = sequential_edge(edge, odometry, graph, front_end).measurement
+        return dataclasses.replace(step, measurement=fused)
     return odometry_edge(edge.a, edge.b, odometry, graph)
 
 
@@ -86,6 +130,27 @@ def held_step(edge: SlamEdge, front_end: FrontEndConfig) -> NDArray[np.float64]:
     """A sequential step as the graph will hold it: the match where it went in or joins the
     keyframes at its match, else the odometry's step."""
     return edge.estimate if edge.kept or joined_at_match(edge, front_end) else edge.guess
+
+
+def drift_edge(edge: SlamEdge, graph: GraphConfig, front_end: FrontEndConfig) -> GraphEdge:
+    """A kept sequential edge as the loop search sees it: the matcher's covariance plus a
+    scan matcher's drift (``front_end.drift_sigma_*``), not the graph's wider floors."""
+    base = matcher_covariance(edge, spread=False)
+    if base is None:
+        return graph_edge(edge, graph)
+    floor = [front_end.drift_sigma_xy**2] * 2 + [math.radians(front_end.drift_sigma_theta_deg) ** 2]
+    return GraphEdge(edge.a, edge.b, edge.estimate, base + np.diag(floor), True)
+
+
+def drift_odometry_edge(
+    edge: SlamEdge, odometry: NDArray[np.float64], graph: GraphConfig, front_end: FrontEndConfig
+) -> GraphEdge:
+    """A rejected sequential step's odometry as the loop search sees it: narrower than the
+    graph's (wide) fallback. Windows widened over every doubted step would hold aliases, and
+    so would a surprise test that any doubted step explains (CSAIL: one alias 14 m off passed
+    alone); where the odometry was truly lost, place recognition finds the revisit, and the
+    graph's wide fallback lets those loops pull it straight."""
+    return odometry_edge(edge.a, edge.b, odometry, narrow_odometry(graph, front_end))
 
 
 def narrow_odometry(graph: GraphConfig, front_end: FrontEndConfig) -> GraphConfig:

@@ -35,11 +35,13 @@ from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
 from vgm_studio.slam.consistency import Loop, consistent
 from vgm_studio.slam.edges import WINDOW_SOURCES, SlamEdge, SlamEdgeKind, Validate
 from vgm_studio.slam.factors import (
+    drift_edge,
+    drift_odometry_edge,
     fallback_edge,
     graph_edge,
     joined_at_match,
-    narrow_odometry,
     odometry_edge,
+    sequential_edge,
 )
 from vgm_studio.slam.loop_search import (
     Candidate,
@@ -156,7 +158,7 @@ class FrontEnd:
         return SlamEdge(kind, a, b, guess, result, injected)
 
     def _sequential(self, block: range) -> None:
-        odo = self.odometry
+        odo, cfg = self.odometry, self.config
         if self.config.sequential_submap > 0:
             edges = self._sequential_matcher.match(block, self.estimate.poses)
         else:
@@ -170,13 +172,17 @@ class FrontEnd:
             self._sequential_matcher.retry(edges, self.validate, self.loop_bar)
         for e in edges:
             if e.kept:
-                factor = graph_edge(e, self.graph)
+                factor = sequential_edge(e, odo, self.graph, cfg)
             else:
                 factor = fallback_edge(e, odo, self.graph, self.config)
                 e.at_match = joined_at_match(e, self.config)
             self.estimate.add_keyframe(se2.compose(self.estimate.poses[e.a], factor.measurement))
             self.estimate.add_edge(factor)
-            self._uncertainty.add(self._drift(e) if e.kept else self._drift_odometry(e))
+            self._uncertainty.add(
+                drift_edge(e, self.graph, cfg)
+                if e.kept
+                else drift_odometry_edge(e, odo, self.graph, cfg)
+            )
             self._graph_uncertainty.add(self._checked_as(e, factor))
         self.edges.extend(edges)
         self.estimate.update()
@@ -379,27 +385,6 @@ class FrontEnd:
             return factor
         wide = odometry_edge(edge.a, edge.b, self.odometry, self.graph)
         return dataclasses.replace(factor, covariance=wide.covariance)
-
-    def _drift_odometry(self, edge: SlamEdge) -> GraphEdge:
-        """A rejected sequential step's odometry as the loop search sees it: narrower than
-        the graph's (wide) fallback. Windows widened over every doubted step would hold
-        aliases, and so would a surprise test that any doubted step explains (CSAIL: one
-        alias 14 m off passed alone); where the odometry was truly lost, place recognition
-        finds the revisit, and the graph's wide fallback lets those loops pull it straight."""
-        narrow = narrow_odometry(self.graph, self.config)
-        return odometry_edge(edge.a, edge.b, self.odometry, narrow)
-
-    def _drift(self, edge: SlamEdge) -> GraphEdge:
-        """A kept sequential edge as the loop search sees it: the matcher's covariance plus a
-        scan matcher's drift, not the graph's wider floors."""
-        cov = edge.match.covariance
-        if cov is None or not np.all(np.isfinite(cov)):
-            return graph_edge(edge, self.graph)
-        base = np.asarray(cov, dtype=np.float64)
-        floor = [self.config.drift_sigma_xy**2] * 2 + [
-            math.radians(self.config.drift_sigma_theta_deg) ** 2
-        ]
-        return GraphEdge(edge.a, edge.b, edge.estimate, base + np.diag(floor), True)
 
     def _add(self, factor: GraphEdge) -> None:
         self.estimate.add_edge(factor)

@@ -20,7 +20,7 @@ from vgm_studio.slam.between import BetweenPlacements, place_between
 from vgm_studio.slam.between_stream import STREAM_FROM, BetweenStream
 from vgm_studio.slam.config import FrontEndConfig, SlamConfig
 from vgm_studio.slam.edges import SlamEdge
-from vgm_studio.slam.factors import fallback_edge, graph_edge
+from vgm_studio.slam.factors import fallback_edge, graph_edge, sequential_edge
 from vgm_studio.slam.frontend import FrontEnd
 from vgm_studio.slam.odometry import scan_odometry
 from vgm_studio.slam.validation import (
@@ -239,7 +239,9 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
     before = optimize(running, [graph_edge(e, config.graph) for e in measured], config.graph)
     after_edges: list[GraphEdge] = []
     for e in edges:
-        if e.kept:
+        if e.kept and e.kind == "sequential":
+            after_edges.append(sequential_edge(e, odo_kf, config.graph, config.front_end))
+        elif e.kept:
             after_edges.append(graph_edge(e, config.graph))
         elif e.kind == "sequential":
             after_edges.append(fallback_edge(e, odo_kf, config.graph, config.front_end))

@@ -1,0 +1,89 @@
+"""How far a match could slide: the covariance of the correlative score's surface around it.
+
+A refinement's covariance, σ̂²·(JᵀJ)⁻¹, is the curvature of its residuals at the pose it
+settled on: millimetres wherever a few points pin the pose, even where another pose half a metre
+along a corridor scores as well or better. The score's own surface says so. Olson ("Real-Time
+Correlative Scan Matching", ICRA 2009, section III.D) reads the surface as a likelihood and
+takes its second moment; here the likelihood of a pose is exp(ΔS / τ), ΔS its score below the
+best one counted in whole points (a point on an end point scores 1) and τ how many points'
+worth of score make a pose e times less likely. Olson's τ is 1, the points independent; a
+scan's neighbouring points see the same wall and are not, so τ is larger.
+
+The surface is sampled on the submap's cells around the pose, in translation at its heading
+and in heading at its translation: the cross terms are left out, and the window's edge bounds
+the spread (a flat corridor reads as the window's own width, not as infinite).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vgm_studio.matching.branch_bound import SearchWindow, _discretise, _scores
+from vgm_studio.matching.submap import PEAK, Submap
+
+
+def response_covariance(
+    submap: Submap,
+    points: NDArray[np.float64],
+    pose: NDArray[np.float64],
+    linear: float,
+    angular: float,
+    temperature: float,
+) -> NDArray[np.float64] | None:
+    """The (x, y, θ) covariance of the score's surface around ``pose``, in the submap's frame.
+
+    Args:
+        submap: The grid the scan was matched on.
+        points: The scan's points, in its own frame.
+        pose: The match: the scan's pose in the submap's frame.
+        linear: Half-width of the translations sampled, metres.
+        angular: Half-width of the headings sampled, radians.
+        temperature: τ, in points (see the module's docstring).
+
+    Returns:
+        None where no point falls on the grid near ``pose``.
+    """
+    if len(points) == 0:
+        return None
+    pose = np.asarray(pose, dtype=np.float64)
+    moves = _discretise(submap, points, pose, SearchWindow(linear, 0.0), None)
+    offsets = np.arange(-moves.reach, moves.reach + 1)
+    gx, gy = (g.ravel() for g in np.meshgrid(offsets, offsets, indexing="ij"))
+    at = np.zeros(len(gx), dtype=np.intp)
+    plane = _scores(moves, 0, at, gx, gy)
+    if plane.max() <= 0:
+        return None
+    cells = np.column_stack([gx, gy]).astype(np.float64) * submap.resolution
+    cov = np.zeros((3, 3))
+    cov[:2, :2] = _moment(cells, plane, temperature)
+    turns = _discretise(submap, points, pose, SearchWindow(0.0, angular), None)
+    still = np.zeros(len(turns.angles), dtype=np.intp)
+    line = _scores(turns, 0, np.arange(len(turns.angles)), still, still)
+    headings = np.asarray(turns.angles - pose[2], dtype=np.float64)[:, None]
+    cov[2, 2] = _moment(headings, line, temperature)[0, 0]
+    return cov
+
+
+def _moment(
+    samples: NDArray[np.float64], scores: NDArray[np.int32], temperature: float
+) -> NDArray[np.float64]:
+    """The second moment of ``samples`` about their weighted mean, each weighted by
+    exp(ΔS / τ)."""
+    gap = (scores.astype(np.float64) - float(scores.max())) / (PEAK * max(temperature, 1e-9))
+    weight = np.exp(gap)
+    weight /= weight.sum()
+    mean = weight @ samples
+    centred = samples - mean
+    out: NDArray[np.float64] = centred.T @ (centred * weight[:, None])
+    return out
+
+
+def score_at(submap: Submap, points: NDArray[np.float64], pose: NDArray[np.float64]) -> float:
+    """The mean grid value under the scan's points at ``pose`` (0..1), as the search scores
+    its grid poses."""
+    if len(points) == 0:
+        return 0.0
+    one = _discretise(submap, points, np.asarray(pose, dtype=np.float64), SearchWindow(0, 0), None)
+    zero = np.zeros(1, dtype=np.intp)
+    return float(_scores(one, 0, zero, zero, zero)[0]) / (PEAK * len(points))
