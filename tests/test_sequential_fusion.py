@@ -12,7 +12,7 @@ from vgm_studio.graph.config import GraphConfig
 from vgm_studio.matching.matcher import MatchResult
 from vgm_studio.slam.config import FrontEndConfig
 from vgm_studio.slam.edges import SlamEdge
-from vgm_studio.slam.factors import sequential_edge
+from vgm_studio.slam.factors import fallback_edge, narrow_odometry, odometry_edge, sequential_edge
 
 ODOMETRY = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
 
@@ -64,3 +64,20 @@ def test_an_odometry_the_scans_rule_out_or_the_rule_off_leaves_the_match():
     np.testing.assert_allclose(
         sequential_edge(slid, ODOMETRY, GraphConfig(), off).measurement, slid.estimate
     )
+
+
+def test_a_step_held_at_its_match_is_weighed_with_the_odometry_too():
+    """The validator unsure (p 0.1) of a match that could slide 0.2 m along x: the step the
+    graph holds lies near the odometry along x, at the odometry's narrow σ."""
+    unsure = dataclasses.replace(
+        _step((-0.2, 0.03, 0.0), spread=(0.2, 0.005, 0.001)),
+        p_success=0.1,
+        kept=False,
+        validated=False,
+    )
+    graph, front = GraphConfig(), FrontEndConfig()
+    factor = fallback_edge(unsure, ODOMETRY, graph, front)
+    narrow = odometry_edge(0, 1, ODOMETRY, narrow_odometry(graph, front))
+    assert abs(factor.measurement[0] - 1.0) < 0.05
+    assert abs(factor.measurement[1] - 0.03) < 0.01
+    np.testing.assert_allclose(factor.covariance, narrow.covariance)

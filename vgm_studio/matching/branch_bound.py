@@ -222,6 +222,26 @@ def brute_force(
     )
 
 
+def surface(
+    submap: Submap,
+    points: NDArray[np.float64],
+    pose: NDArray[np.float64],
+    window: SearchWindow,
+    *,
+    step: float | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int32]]:
+    """Every pose of the discretised window around ``pose`` scored, as ``brute_force`` scores
+    them: the headings (radians), the shifts (metres, the same along x and y) and the scores
+    (sums of grid values, ``PEAK`` a point on an end point), indexed [heading, x, y]."""
+    w = _discretise(submap, points, np.asarray(pose, np.float64), window, step)
+    offsets = np.arange(-w.reach, w.reach + 1)
+    a, gx, gy = (
+        g.ravel() for g in np.meshgrid(np.arange(len(w.angles)), offsets, offsets, indexing="ij")
+    )
+    scores = _scores(w, 0, a, gx, gy).reshape(len(w.angles), len(offsets), len(offsets))
+    return w.angles, offsets.astype(np.float64) * submap.resolution, scores
+
+
 def thin_points(points: NDArray[np.float64], spacing: float) -> NDArray[np.float64]:
     """Keeps the first point of every ``spacing``-sized square cell, in scan order."""
     if spacing <= 0 or len(points) == 0:

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from vgm_studio.matching.branch_bound import SearchWindow, _discretise, _scores
+from vgm_studio.matching.branch_bound import SearchWindow, surface
 from vgm_studio.matching.submap import PEAK, Submap
 
 
@@ -47,21 +47,14 @@ def response_covariance(
     if len(points) == 0:
         return None
     pose = np.asarray(pose, dtype=np.float64)
-    moves = _discretise(submap, points, pose, SearchWindow(linear, 0.0), None)
-    offsets = np.arange(-moves.reach, moves.reach + 1)
-    gx, gy = (g.ravel() for g in np.meshgrid(offsets, offsets, indexing="ij"))
-    at = np.zeros(len(gx), dtype=np.intp)
-    plane = _scores(moves, 0, at, gx, gy)
+    _, shifts, plane = surface(submap, points, pose, SearchWindow(linear, 0.0))
     if plane.max() <= 0:
         return None
-    cells = np.column_stack([gx, gy]).astype(np.float64) * submap.resolution
+    gx, gy = (g.ravel() for g in np.meshgrid(shifts, shifts, indexing="ij"))
     cov = np.zeros((3, 3))
-    cov[:2, :2] = _moment(cells, plane, temperature)
-    turns = _discretise(submap, points, pose, SearchWindow(0.0, angular), None)
-    still = np.zeros(len(turns.angles), dtype=np.intp)
-    line = _scores(turns, 0, np.arange(len(turns.angles)), still, still)
-    headings = np.asarray(turns.angles - pose[2], dtype=np.float64)[:, None]
-    cov[2, 2] = _moment(headings, line, temperature)[0, 0]
+    cov[:2, :2] = _moment(np.column_stack([gx, gy]), plane.ravel(), temperature)
+    headings, _, line = surface(submap, points, pose, SearchWindow(0.0, angular))
+    cov[2, 2] = _moment((headings - pose[2])[:, None], line.ravel(), temperature)[0, 0]
     return cov
 
 
@@ -84,6 +77,5 @@ def score_at(submap: Submap, points: NDArray[np.float64], pose: NDArray[np.float
     its grid poses."""
     if len(points) == 0:
         return 0.0
-    one = _discretise(submap, points, np.asarray(pose, dtype=np.float64), SearchWindow(0, 0), None)
-    zero = np.zeros(1, dtype=np.intp)
-    return float(_scores(one, 0, zero, zero, zero)[0]) / (PEAK * len(points))
+    _, _, one = surface(submap, points, np.asarray(pose, dtype=np.float64), SearchWindow(0, 0))
+    return float(one[0, 0, 0]) / (PEAK * len(points))

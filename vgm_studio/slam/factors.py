@@ -34,8 +34,16 @@ def sequential_edge(
     edge: SlamEdge, odometry: NDArray[np.float64], graph: GraphConfig, front_end: FrontEndConfig
 ) -> GraphEdge:
     """The factor of a kept sequential match: the match and its odometry step fused, each by
-    its information (the odometry at ``front_end.drift_odometry_sigma_*``), where
-    ``front_end.sequential_odometry`` asks for it; else the match alone."""
+    its information, where ``front_end.sequential_odometry`` asks for it; else the match alone.
+
+    The match weighs by its covariance and the spread of its score's surface
+    (``matcher_covariance``), the odometry by its translation at
+    ``front_end.drift_odometry_sigma_xy``: along a corridor, where the match could slide, the
+    odometry holds the step; where the match is pinned, the match does. Not where the
+    headings differ by more than three ``front_end.drift_odometry_sigma_theta_deg``, nor
+    where the scans at the odometry's step keep under ``front_end.sequential_odometry_share``
+    of the match's score: then the odometry is off, and the match stands alone.
+    """
     match = graph_edge(edge, graph)
     if not front_end.sequential_odometry:
         return match
@@ -86,7 +94,8 @@ def fallback_edge(
     - The odometry, narrow (``front_end.drift_odometry_sigma_*``), where the slide check took
       a kept match out: a match across two steps confirmed the odometry there, and a wide
       step would leave the graph unsure for nothing.
-    - The match, at that narrow σ, where the validator was unsure of it
+    - The match (weighed with the odometry's step as a kept one is, ``sequential_edge``),
+      at that narrow σ, where the validator was unsure of it
       (``front_end.sequential_unsure``) and it lies in the smallest window around the
       odometry's step (``joined_at_match``): the wheels vouch for the neighbourhood, the
       scans for the pose in it. A validator that never saw the building doubts many right
