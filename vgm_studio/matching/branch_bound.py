@@ -111,7 +111,7 @@ def _discretise(
     angles = guess[2] + step * np.arange(-n, n + 1, dtype=np.float64)
     reach = math.floor(window.linear / submap.resolution + 1e-9)
     # Shared between windows of similar reach, as the padded copies are cached per size.
-    extra = 64 * math.ceil(2 * reach / 64)
+    extra = submap.padding_for(64 * math.ceil(2 * reach / 64))
     levels = submap.padded(extra)
     grid = (submap.origin, submap.resolution, submap.shape)
     base = bb_kernel.cells(points, angles, guess, grid, reach, extra)
