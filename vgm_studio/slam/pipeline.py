@@ -236,7 +236,14 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
     odo_kf = odometry[keyframes]
     # Every edge the matcher measured; a loop it could not place (no pose scored) has none.
     measured = [e for e in edges if e.kind == "sequential" or e.match.covariance is not None]
-    before = optimize(running, [graph_edge(e, config.graph) for e in measured], config.graph)
+    # Each measured edge as the after graph would hold it, were it kept.
+    as_kept = [
+        sequential_edge(e, odo_kf, config.graph, config.front_end)
+        if e.kind == "sequential"
+        else graph_edge(e, config.graph)
+        for e in measured
+    ]
+    before = optimize(running, as_kept, config.graph)
     after_edges: list[GraphEdge] = []
     for e in edges:
         if e.kept and e.kind == "sequential":
