@@ -30,6 +30,16 @@ def graph_edge(edge: SlamEdge, config: GraphConfig) -> GraphEdge:
     )
 
 
+def kept_edge(
+    edge: SlamEdge, odometry: NDArray[np.float64], graph: GraphConfig, front_end: FrontEndConfig
+) -> GraphEdge:
+    """The factor of an edge that goes into the graph: a sequential step weighed with its
+    odometry (``sequential_edge``), a loop at its matcher's covariance (``graph_edge``)."""
+    if edge.kind == "sequential":
+        return sequential_edge(edge, odometry, graph, front_end)
+    return graph_edge(edge, graph)
+
+
 def sequential_edge(
     edge: SlamEdge, odometry: NDArray[np.float64], graph: GraphConfig, front_end: FrontEndConfig
 ) -> GraphEdge:

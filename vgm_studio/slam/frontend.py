@@ -174,8 +174,8 @@ class FrontEnd:
             if e.kept:
                 factor = sequential_edge(e, odo, self.graph, cfg)
             else:
-                factor = fallback_edge(e, odo, self.graph, self.config)
-                e.at_match = joined_at_match(e, self.config)
+                factor = fallback_edge(e, odo, self.graph, cfg)
+                e.at_match = joined_at_match(e, cfg)
             self.estimate.add_keyframe(se2.compose(self.estimate.poses[e.a], factor.measurement))
             self.estimate.add_edge(factor)
             self._uncertainty.add(

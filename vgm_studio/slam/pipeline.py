@@ -20,7 +20,7 @@ from vgm_studio.slam.between import BetweenPlacements, place_between
 from vgm_studio.slam.between_stream import STREAM_FROM, BetweenStream
 from vgm_studio.slam.config import FrontEndConfig, SlamConfig
 from vgm_studio.slam.edges import SlamEdge
-from vgm_studio.slam.factors import fallback_edge, graph_edge, sequential_edge
+from vgm_studio.slam.factors import fallback_edge, kept_edge
 from vgm_studio.slam.frontend import FrontEnd
 from vgm_studio.slam.odometry import scan_odometry
 from vgm_studio.slam.validation import (
@@ -237,19 +237,12 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
     # Every edge the matcher measured; a loop it could not place (no pose scored) has none.
     measured = [e for e in edges if e.kind == "sequential" or e.match.covariance is not None]
     # Each measured edge as the after graph would hold it, were it kept.
-    as_kept = [
-        sequential_edge(e, odo_kf, config.graph, config.front_end)
-        if e.kind == "sequential"
-        else graph_edge(e, config.graph)
-        for e in measured
-    ]
+    as_kept = [kept_edge(e, odo_kf, config.graph, config.front_end) for e in measured]
     before = optimize(running, as_kept, config.graph)
     after_edges: list[GraphEdge] = []
     for e in edges:
-        if e.kept and e.kind == "sequential":
-            after_edges.append(sequential_edge(e, odo_kf, config.graph, config.front_end))
-        elif e.kept:
-            after_edges.append(graph_edge(e, config.graph))
+        if e.kept:
+            after_edges.append(kept_edge(e, odo_kf, config.graph, config.front_end))
         elif e.kind == "sequential":
             after_edges.append(fallback_edge(e, odo_kf, config.graph, config.front_end))
     after = optimize(running, after_edges, config.graph)
