@@ -163,6 +163,87 @@ def test_a_slid_match_between_two_rejected_steps_is_checked_against_their_odomet
         assert sum(x.kept for x in edges) == len(edges) - 2 - slid
 
 
+class _SearchFails(LoopMatcher):
+    """A loop matcher whose submap search scores nothing (a scan that sees little); its
+    ``search`` still scores poses."""
+
+    def match(self, submap, target, scan, guess, window, min_score=None):  # type: ignore[no-untyped-def]
+        return MatchResult(guess, 0, False, 0.0, float("inf"), None, guess)
+
+
+class _Answers(ScanMatcher):
+    """A pairwise matcher that answers each step with ``answers[b]``."""
+
+    def __init__(self, answers: dict[int, np.ndarray]) -> None:
+        super().__init__()
+        self.answers = answers
+        self.index = {}
+
+    def match(self, a: Scan, b: Scan, guess):  # type: ignore[no-untyped-def]
+        result = super().match(a, b, guess)
+        return dataclasses.replace(result, estimate=self.answers[self.index[id(b)]])
+
+
+def test_a_pairwise_answer_out_of_the_window_needs_the_submap_on_its_side(office):
+    """Where the submap search scores nothing, the pairwise matcher's answer stands in; one
+    outside the smallest window is taken only where the submap scores it clearly above the
+    odometry's step: a slid answer against a right odometry is no match (the graph joins
+    that step by its odometry), a right answer against a slipped odometry is taken."""
+    scans, truth = _first_keyframes(office, 30)
+    steps = {k: se2.between(truth[k - 1], truth[k]) for k in range(1, 20)}
+    along = np.array([0.6, 0.0, 0.0])
+    answers = _Answers({})
+    answers.index = {id(scans[k]): k for k in steps}
+
+    def matched(slid: bool, gain: float | None = 0.1) -> MatchResult:
+        odometry = truth.copy()
+        if slid:  # the pairwise fit walked off; the odometry is right
+            answers.answers = {k: se2.compose(s, along) for k, s in steps.items()}
+        else:  # the odometry slipped at keyframe 9; the answers are right
+            answers.answers = dict(steps)
+            odometry[9:] = se2.compose(
+                truth[8], se2.compose(along, se2.between(truth[8], truth[9:]))
+            )
+        config = FrontEndConfig(sequential_pairwise_gain=gain)
+        matcher = SequentialMatcher(
+            scans, odometry, answers, _SearchFails(CorrelativeConfig(min_score=0.3)), config
+        )
+        return matcher.match(range(1, 20), truth)[8].match
+
+    assert matched(slid=True).covariance is None
+    assert matched(slid=True, gain=None).covariance is not None
+    right = matched(slid=False)
+    assert right.covariance is not None
+    np.testing.assert_allclose(right.estimate, steps[9])
+
+
+def test_a_step_with_no_match_stays_out_whatever_the_validator_says(office, monkeypatch):
+    """The validator judges a step with no match at its odometry step, which is right here:
+    it would keep it, but a step with no match is no measurement, and the odometry joins it."""
+    scans, truth = _first_keyframes(office, 12)
+    answers = _Answers(
+        {
+            k: se2.compose(se2.between(truth[k - 1], truth[k]), np.array([0.6, 0, 0]))
+            for k in range(1, 12)
+        }
+    )
+    answers.index = {id(s): k for k, s in enumerate(scans)}
+    monkeypatch.setattr(LoopMatcher, "match", _SearchFails.match)
+    front = FrontEnd(
+        scans,
+        truth,
+        answers,
+        EdgeValidator(ValidationConfig(validator="reference"), scans, truth),
+        FrontEndConfig(loop_min_gap=1000),
+        GraphConfig(),
+    )
+    edges = front.run(progress=False)
+    assert len(edges) == 11 and all(e.kind == "sequential" for e in edges)
+    assert all(e.p_success == 1.0 for e in edges)
+    assert not any(e.kept or e.validated for e in edges)
+    np.testing.assert_allclose(front.estimate.poses, truth, atol=1e-6)
+
+
 class _CountingMatcher(LoopMatcher):
     calls = 0
 

@@ -166,6 +166,9 @@ class FrontEnd:
                 self._match("sequential", k - 1, k, se2.between(odo[k - 1], odo[k])) for k in block
             ]
         self.validate(edges)
+        for e in edges:
+            # A step with no match (``SequentialMatcher._pairwise``) is joined by its odometry.
+            e.kept = e.validated = e.kept and e.match.covariance is not None
         if self.config.sequential_slide_check and self.config.sequential_submap > 0:
             self._sequential_matcher.check_slides(edges)
         if self.config.sequential_retry and self.config.sequential_submap > 0:

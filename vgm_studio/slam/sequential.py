@@ -81,10 +81,31 @@ class SequentialMatcher:
             )
             if result.covariance is None:
                 # Nothing scored (a scan that sees little): the pairwise matcher's answer.
-                result = self.matcher.match(self.scans[k - 1], self.scans[k], guess)
+                result = self._pairwise(submap, k, guess, result)
             edges.append(SlamEdge("sequential", k - 1, k, guess, result))
             poses[k] = se2.compose(poses[k - 1], edges[-1].estimate)
         return edges
+
+    def _pairwise(
+        self, submap: Submap, k: int, guess: NDArray[np.float64], failed: MatchResult
+    ) -> MatchResult:
+        """The pairwise matcher's answer for keyframe k, where the submap search scored
+        nothing; ``failed`` (no match) where the answer lies outside the smallest window and
+        the submap does not score it ``sequential_pairwise_gain`` above the odometry's
+        step."""
+        answer = self.matcher.match(self.scans[k - 1], self.scans[k], guess)
+        gain = self.config.sequential_pairwise_gain
+        if gain is None or self.inside(SlamEdge("sequential", k - 1, k, guess, answer)):
+            return answer
+        near_answer = self._best_score(submap, k, answer.estimate)
+        near_odometry = self._best_score(submap, k, guess)
+        return answer if near_answer >= near_odometry + gain else failed
+
+    def _best_score(self, submap: Submap, k: int, centre: NDArray[np.float64]) -> float:
+        """The submap's best score of keyframe k in the smallest window around ``centre``,
+        however low."""
+        hit = self.loop_matcher.search(submap, self.scans[k], centre, self._small_window, 0.0)
+        return 0.0 if hit is None else hit.score
 
     def check_slides(self, edges: list[SlamEdge]) -> None:
         """Kept matches that ended further from the odometry than the window they were
