@@ -172,12 +172,13 @@ class _SearchFails(LoopMatcher):
 
 
 class _Answers(ScanMatcher):
-    """A pairwise matcher that answers each step with ``answers[b]``."""
+    """A pairwise matcher that answers the step onto keyframe k (``scans[k]``) with
+    ``answers[k]``."""
 
-    def __init__(self, answers: dict[int, np.ndarray]) -> None:
+    def __init__(self, answers: dict[int, np.ndarray], scans: Sequence[Scan]) -> None:
         super().__init__()
         self.answers = answers
-        self.index = {}
+        self.index = {id(s): k for k, s in enumerate(scans)}
 
     def match(self, a: Scan, b: Scan, guess):  # type: ignore[no-untyped-def]
         result = super().match(a, b, guess)
@@ -192,8 +193,7 @@ def test_a_pairwise_answer_out_of_the_window_needs_the_submap_on_its_side(office
     scans, truth = _first_keyframes(office, 30)
     steps = {k: se2.between(truth[k - 1], truth[k]) for k in range(1, 20)}
     along = np.array([0.6, 0.0, 0.0])
-    answers = _Answers({})
-    answers.index = {id(scans[k]): k for k in steps}
+    answers = _Answers({}, scans)
 
     def matched(slid: bool, gain: float | None = 0.1) -> MatchResult:
         odometry = truth.copy()
@@ -225,9 +225,9 @@ def test_a_step_with_no_match_stays_out_whatever_the_validator_says(office, monk
         {
             k: se2.compose(se2.between(truth[k - 1], truth[k]), np.array([0.6, 0, 0]))
             for k in range(1, 12)
-        }
+        },
+        scans,
     )
-    answers.index = {id(s): k for k, s in enumerate(scans)}
     monkeypatch.setattr(LoopMatcher, "match", _SearchFails.match)
     front = FrontEnd(
         scans,
