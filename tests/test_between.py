@@ -109,3 +109,41 @@ def test_keyframes_the_worker_did_not_pick_are_placed_after_the_odometry(run, mo
     placed = _stream(log, result).result(result.odometry, other, progress=False)
     assert made == [1]
     assert not set(placed.index.tolist()) & set(other.tolist())
+
+
+_PARENT = """
+import sys, time
+import numpy as np
+from vgm_studio.datasets import open_log
+from vgm_studio.slam.between_stream import BetweenStream
+
+log = open_log(sys.argv[1])
+stream = BetweenStream(log.scans, np.ones(len(log), dtype=bool), (0.5, 20.0))
+print(stream._proc.pid, flush=True)
+time.sleep(600)
+"""
+
+
+def test_the_worker_goes_with_a_parent_killed_outright_while_it_starts(tmp_path):
+    """The worker starts without holding its parent up (the scans follow through its queue),
+    so the parent can be killed before the worker has read them: it must not wait for them
+    for ever."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    from orphans import gone_within
+
+    log = simulate(SimConfig(preset="loop", seed=2, num_beams=181, laps=0.3), tmp_path)
+    parent = subprocess.Popen(
+        [sys.executable, "-c", _PARENT, str(log)], stdout=subprocess.PIPE, text=True
+    )
+    assert parent.stdout is not None
+    worker = int(parent.stdout.readline())
+    os.kill(worker, 0)  # alive
+    parent.send_signal(signal.SIGKILL)
+    parent.wait()
+    if not gone_within(worker, 20):
+        os.kill(worker, signal.SIGKILL)
+        raise AssertionError("the worker outlived its parent by 20 s")

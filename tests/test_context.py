@@ -489,7 +489,8 @@ def test_a_worker_whose_parent_is_killed_outright_goes_too(tmp_path):
     import signal
     import subprocess
     import sys
-    import time
+
+    from orphans import gone_within
 
     from vgm_studio.simulation.simulate import SimConfig, simulate
 
@@ -502,16 +503,6 @@ def test_a_worker_whose_parent_is_killed_outright_goes_too(tmp_path):
     os.kill(worker, 0)  # alive
     parent.send_signal(signal.SIGKILL)
     parent.wait()
-    deadline = time.monotonic() + 20
-    while time.monotonic() < deadline:
-        try:
-            os.kill(worker, 0)
-        except ProcessLookupError:
-            return
-        # A worker that went is a zombie until someone reaps it: it has no parent now but init.
-        with open(f"/proc/{worker}/stat") as stat:
-            if stat.read().split(")")[-1].split()[0] == "Z":
-                return
-        time.sleep(0.2)
-    os.kill(worker, signal.SIGKILL)
-    raise AssertionError("the worker outlived its parent by 20 s")
+    if not gone_within(worker, 20):
+        os.kill(worker, signal.SIGKILL)
+        raise AssertionError("the worker outlived its parent by 20 s")

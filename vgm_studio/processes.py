@@ -20,8 +20,12 @@ def spawn() -> multiprocessing.context.SpawnContext:
 
 def exit_with_parent() -> None:
     """Ends this worker process when its parent is gone: a parent killed outright (kill -9)
-    closes no pipe the worker waits on, and it would wait on."""
-    parent = os.getppid()
+    closes no pipe the worker waits on, and it would wait on.
+
+    The parent is the one that spawned this worker, not the one it has now: a parent killed
+    while the worker was still starting has already left it to init."""
+    spawned_by = multiprocessing.parent_process()
+    parent = spawned_by.pid if spawned_by is not None else os.getppid()
 
     def watch() -> None:
         while os.getppid() == parent:

@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,12 +30,14 @@ CHUNK = 64
 _mapper: LocalMapper | None = None  # the worker process's own
 
 
-def _start(
-    scans: Sequence[Scan], poses: NDArray[np.float64], context: Context, config: MatchConfig
-) -> None:
+def _start(inputs: Any) -> None:
+    """Reads the mapper's inputs from the ``inputs`` queue: given as the process's arguments,
+    the pool's start waited on the worker's imports (about a second on Intel)."""
     global _mapper
-    _mapper = LocalMapper(scans, poses, context, ScanMatcher(config))
     exit_with_parent()
+    given: tuple[Sequence[Scan], NDArray[np.float64], Context, MatchConfig] = inputs.get()
+    scans, poses, context, config = given
+    _mapper = LocalMapper(scans, poses, context, ScanMatcher(config))
 
 
 def _place(centres: list[int]) -> Placements:
@@ -61,19 +64,17 @@ class PlacingAhead:
         self._pending: deque[Future[Placements]] = deque()
         order = [int(c) for c in centres]
         try:
+            context = spawn()
+            # Kept while the worker lives: its thread writes the inputs as the worker starts.
+            self._inputs: Any = context.Queue()
             self._pool = ProcessPoolExecutor(
-                1,
-                mp_context=spawn(),
-                initializer=_start,
-                initargs=(
-                    mapper.scans,
-                    np.asarray(mapper.poses),
-                    mapper.context,
-                    mapper.match_config,
-                ),
+                1, mp_context=context, initializer=_start, initargs=(self._inputs,)
             )
             for i in range(0, len(order), CHUNK):
                 self._pending.append(self._pool.submit(_place, order[i : i + CHUNK]))
+            self._inputs.put(
+                (list(mapper.scans), np.asarray(mapper.poses), mapper.context, mapper.match_config)
+            )
         except (OSError, RuntimeError):  # no processes here (no /dev/shm, a sandbox): no help
             self.close()
 
