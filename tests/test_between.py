@@ -147,3 +147,36 @@ def test_the_worker_goes_with_a_parent_killed_outright_while_it_starts(tmp_path)
     if not gone_within(worker, 20):
         os.kill(worker, signal.SIGKILL)
         raise AssertionError("the worker outlived its parent by 20 s")
+
+
+_DEAD_WORKER = """
+import sys
+import numpy as np
+from vgm_studio.datasets import open_log
+from vgm_studio.slam.between_stream import BetweenStream
+
+log = open_log(sys.argv[1])
+stream = BetweenStream(log.scans, np.ones(len(log), dtype=bool), (0.5, 20.0))
+stream._proc.kill()  # dies before it has read the scans
+stream._proc.join()
+odometry = np.array([s.odometry for s in log.scans])
+placed = stream.result(odometry, np.arange(0, len(log), 10), progress=False)
+print(len(log), len(placed.index), flush=True)
+"""
+
+
+def test_a_worker_that_died_before_reading_its_scans_holds_nothing_up(tmp_path):
+    """The scans wait in the worker's queue; a worker that died (killed, out of memory) never
+    reads them. The run places the anchors itself and the process still exits, rather
+    than waiting at its exit to write scans nobody reads."""
+    import subprocess
+    import sys
+
+    log = simulate(SimConfig(preset="loop", seed=2, num_beams=181, laps=0.3), tmp_path)
+    done = subprocess.run(
+        [sys.executable, "-c", _DEAD_WORKER, str(log)], capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 0, done.stderr
+    scans, anchors = map(int, done.stdout.split())
+    assert scans * 181 * 8 > 1 << 16  # more than a pipe holds
+    assert anchors > 0

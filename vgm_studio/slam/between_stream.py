@@ -58,6 +58,9 @@ class BetweenStream:
         self._scans = scans
         context = spawn()
         self._to: Any = context.Queue()
+        # A worker that died before reading the scans leaves them in the queue's pipe; the
+        # run goes on without it, and must not wait at its exit to write them.
+        self._to.cancel_join_thread()
         self._back: Any = context.Queue()
         self._proc = context.Process(target=_work, args=(self._to, self._back), daemon=True)
         self._proc.start()

@@ -67,6 +67,7 @@ class PlacingAhead:
             context = spawn()
             # Kept while the worker lives: its thread writes the inputs as the worker starts.
             self._inputs: Any = context.Queue()
+            self._inputs.cancel_join_thread()  # nor wait at exit for a worker that died
             self._pool = ProcessPoolExecutor(
                 1, mp_context=context, initializer=_start, initargs=(self._inputs,)
             )
