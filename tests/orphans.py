@@ -1,12 +1,33 @@
-"""Whether a worker process went after its parent was killed outright (kill -9)."""
+"""Whether a worker process goes when its parent is killed outright (kill -9)."""
 
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 
-def gone_within(pid: int, seconds: float) -> bool:
+def assert_worker_goes_with_its_parent(parent_script: str, log: Path) -> None:
+    """Runs ``parent_script`` (given ``log`` as its argument; it prints its worker's pid and
+    waits), kills it outright once the worker is alive, and asserts the worker goes within
+    20 s."""
+    parent = subprocess.Popen(
+        [sys.executable, "-c", parent_script, str(log)], stdout=subprocess.PIPE, text=True
+    )
+    assert parent.stdout is not None
+    worker = int(parent.stdout.readline())
+    os.kill(worker, 0)  # alive
+    parent.send_signal(signal.SIGKILL)
+    parent.wait()
+    if not _gone_within(worker, 20):
+        os.kill(worker, signal.SIGKILL)
+        raise AssertionError("the worker outlived its parent by 20 s")
+
+
+def _gone_within(pid: int, seconds: float) -> bool:
     """Whether process ``pid`` ends within ``seconds``: gone, or a zombie (a worker that went
     is one until someone reaps it, and with its parent killed nobody but init will)."""
     deadline = time.monotonic() + seconds

@@ -128,25 +128,10 @@ def test_the_worker_goes_with_a_parent_killed_outright_while_it_starts(tmp_path)
     """The worker starts without holding its parent up (the scans follow through its queue),
     so the parent can be killed before the worker has read them: it must not wait for them
     for ever."""
-    import os
-    import signal
-    import subprocess
-    import sys
-
-    from orphans import gone_within
+    from orphans import assert_worker_goes_with_its_parent
 
     log = simulate(SimConfig(preset="loop", seed=2, num_beams=181, laps=0.3), tmp_path)
-    parent = subprocess.Popen(
-        [sys.executable, "-c", _PARENT, str(log)], stdout=subprocess.PIPE, text=True
-    )
-    assert parent.stdout is not None
-    worker = int(parent.stdout.readline())
-    os.kill(worker, 0)  # alive
-    parent.send_signal(signal.SIGKILL)
-    parent.wait()
-    if not gone_within(worker, 20):
-        os.kill(worker, signal.SIGKILL)
-        raise AssertionError("the worker outlived its parent by 20 s")
+    assert_worker_goes_with_its_parent(_PARENT, log)
 
 
 _DEAD_WORKER = """

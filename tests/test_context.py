@@ -485,24 +485,9 @@ time.sleep(600)
 def test_a_worker_whose_parent_is_killed_outright_goes_too(tmp_path):
     """kill -9 closes no pipe the worker waits on, so the worker watches its parent and goes
     when it does: no orphan left placing neighbours for nobody."""
-    import os
-    import signal
-    import subprocess
-    import sys
-
-    from orphans import gone_within
+    from orphans import assert_worker_goes_with_its_parent
 
     from vgm_studio.simulation.simulate import SimConfig, simulate
 
     log = simulate(SimConfig(preset="loop", seed=2, num_beams=181, laps=0.3), tmp_path)
-    parent = subprocess.Popen(
-        [sys.executable, "-c", _PARENT, str(log)], stdout=subprocess.PIPE, text=True
-    )
-    assert parent.stdout is not None
-    [worker] = map(int, parent.stdout.readline().split())
-    os.kill(worker, 0)  # alive
-    parent.send_signal(signal.SIGKILL)
-    parent.wait()
-    if not gone_within(worker, 20):
-        os.kill(worker, signal.SIGKILL)
-        raise AssertionError("the worker outlived its parent by 20 s")
+    assert_worker_goes_with_its_parent(_PARENT, log)
