@@ -116,12 +116,9 @@ def _stop(proc: Any, to: Any) -> None:
 
 def _work(to: Any, back: Any) -> None:
     exit_with_parent()
-    first = to.get()
-    if first[0] != "scans":  # stopped before it began
-        return
-    scans: list[Scan] = first[1]
-    usable: NDArray[np.bool_] = first[2]
-    keyframe_step: tuple[float, float] = first[3]
+    # The queue's first message, always: ``BetweenStream`` puts it before any other.
+    given: tuple[str, list[Scan], NDArray[np.bool_], tuple[float, float]] = to.get()
+    _, scans, usable, keyframe_step = given
     odometry = np.full((len(scans), 3), np.nan)
     refine = Refiner(scans, odometry)
     # The run picks keyframes among the usable scans and anchors among all (``place_between``).

@@ -165,10 +165,7 @@ class FrontEnd:
             edges = [
                 self._match("sequential", k - 1, k, se2.between(odo[k - 1], odo[k])) for k in block
             ]
-        self.validate(edges)
-        for e in edges:
-            # A step with no match (``SequentialMatcher._pairwise``) is joined by its odometry.
-            e.kept = e.validated = e.kept and e.match.covariance is not None
+        self._validate_measured(edges)
         if self.config.sequential_slide_check and self.config.sequential_submap > 0:
             self._sequential_matcher.check_slides(edges)
         if self.config.sequential_retry and self.config.sequential_submap > 0:
@@ -189,6 +186,14 @@ class FrontEnd:
             self._graph_uncertainty.add(self._checked_as(e, factor))
         self.edges.extend(edges)
         self.estimate.update()
+
+    def _validate_measured(self, edges: list[SlamEdge]) -> None:
+        """Validates ``edges``; one whose match failed stays out whatever the validator says:
+        a failed match returns its guess, no measurement (a loop no pose scored; a step with
+        no match, ``SequentialMatcher._pairwise``, which its odometry joins)."""
+        self.validate(edges)
+        for e in edges:
+            e.kept = e.validated = e.kept and e.match.covariance is not None
 
     def _loops(self, block: range) -> None:
         # Submaps are placed by the estimate, which moves when loops close: built per block.
@@ -234,10 +239,7 @@ class FrontEnd:
         unique = {self._submap_key(c.a, c.b): c for c in candidates}
         self._map(lambda c: self._submap(c.a, c.b), list(unique.values()))
         edges = self._map(self._match_loop, candidates)
-        self.validate(edges)
-        for e in edges:
-            # A failed match returns its guess: no measurement, whatever a validator says.
-            e.kept = e.validated = e.kept and e.match.covariance is not None
+        self._validate_measured(edges)
         self._judge_turned(edges, poses)
         self._check_consistency([e for e in edges if e.kept], poses)
         kept = [e for e in edges if e.kept]
