@@ -129,6 +129,13 @@ class Progress(Generic[T]):
         if self._bar is not None:
             self._bar.set_postfix(values)
 
+    def set_total(self, total: int) -> None:
+        """The count now known to be the whole (it was not when the loop began)."""
+        self.total = total
+        if self._bar is not None:
+            self._bar.total = total
+            self._bar.refresh()
+
     def set_description(self, desc: str) -> None:
         self.desc = desc
         if self._bar is not None:

@@ -14,8 +14,9 @@ next block.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
 
@@ -35,12 +36,12 @@ from vgm_studio.slam.config import ConsistencyConfig, FrontEndConfig
 from vgm_studio.slam.consistency import Loop, consistent
 from vgm_studio.slam.edges import WINDOW_SOURCES, SlamEdge, SlamEdgeKind, Validate
 from vgm_studio.slam.factors import (
+    checked_as,
     drift_edge,
     drift_odometry_edge,
     fallback_edge,
     graph_edge,
     joined_at_match,
-    odometry_edge,
     sequential_edge,
 )
 from vgm_studio.slam.loop_search import (
@@ -119,21 +120,32 @@ class FrontEnd:
         self._searched: dict[int, NDArray[np.float64]] = {}
         self._noise = np.random.default_rng([config.seed, 3])
 
-    def run(self, progress: bool = True) -> list[SlamEdge]:
-        """Matches and validates every edge; ``self.estimate`` ends with the kept ones."""
-        count = len(self.scans)
-        bar = counter(count, "front end", "keyframe", enabled=progress)
+    def run(self, progress: bool = True, arrivals: Iterable[int] = ()) -> list[SlamEdge]:
+        """Matches and validates every edge; ``self.estimate`` ends with the kept ones.
+
+        ``arrivals``: where the keyframes are still being made (``odometry_stream``), how
+        many are ready, after each chunk; a block is taken once all of its keyframes are, the
+        last ones once ``arrivals`` ends. The blocks are those of a run given all at once.
+        """
+        bar = counter(None, "front end", "keyframe", enabled=progress)
         bar.update(1)
+        start, size = 1, self.config.block
         with ThreadPoolExecutor(self._threads, thread_name_prefix="loops") as self._pool:
-            for start in range(1, count, self.config.block):
-                block = range(start, min(start + self.config.block, count))
-                self._sequential(block)
-                self._loops(block)
-                bar.update(len(block))
-                bar.set_postfix(
-                    loops=sum(e.kind == "loop" for e in self.edges),
-                    kept=sum(e.kind == "loop" and e.kept for e in self.edges),
-                )
+            for known in itertools.chain(arrivals, [None]):
+                last = known is None
+                if known is None:
+                    known = len(self.scans)
+                    bar.set_total(known)
+                while start < known and (last or start + size <= known):
+                    block = range(start, min(start + size, known))
+                    self._sequential(block)
+                    self._loops(block)
+                    start = block.stop
+                    bar.update(len(block))
+                    bar.set_postfix(
+                        loops=sum(e.kind == "loop" for e in self.edges),
+                        kept=sum(e.kind == "loop" and e.kept for e in self.edges),
+                    )
             if self.config.final_sweep:
                 bar.set_description("front end, final sweep")
                 self._sweep()
@@ -371,25 +383,8 @@ class FrontEnd:
         self._checks += 1
 
     def _checked_as(self, edge: SlamEdge, factor: GraphEdge) -> GraphEdge:
-        """A sequential edge as the consistency check reads the chain: a match that lies
-        outside the smallest window around its odometry step and that the validator kept
-        under the loop bar reads as the odometry's wide step, centred on the match.
-
-        There the match and the odometry disagree and the validator is not sure of the
-        match: the step is kept (likelier right than the odometry), but a check that held it
-        at the matcher's centimetres would call a revisit wrong for disagreeing with it. On
-        CSAIL a model that kept keyframes 322→323 at p 0.21 (0.45 m off; the odometry 14°
-        off) lost the revisit's right loops 114→321 and 116→323 so, and its map ended 0.43 m
-        off; read so, 0.11 m (the bundled model, which had rejected that step: 0.085 →
-        0.070 m). Every unsure step read so, agreeing with its odometry or not, let the
-        infinite corridor's aliases in: 0.057 → 4.9 m.
-        """
-        if not edge.kept or self.loop_bar is None or not edge.p_success < self.loop_bar:
-            return factor
-        if self._sequential_matcher.inside(edge):
-            return factor
-        wide = odometry_edge(edge.a, edge.b, self.odometry, self.graph)
-        return dataclasses.replace(factor, covariance=wide.covariance)
+        inside = self._sequential_matcher.inside(edge)
+        return checked_as(edge, factor, self.odometry, self.graph, self.loop_bar, inside)
 
     def _add(self, factor: GraphEdge) -> None:
         self.estimate.add_edge(factor)

@@ -3,18 +3,20 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import multiprocessing
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from vgm_studio.core import se2
-from vgm_studio.datasets.scans import ScanLog
+from vgm_studio.datasets.scans import Scan, ScanLog
 from vgm_studio.errors import InputError
 from vgm_studio.graph.pose_graph import GraphEdge, OptimizeResult, optimize
-from vgm_studio.matching.candidates import select_keyframes
+from vgm_studio.matching.candidates import KeyframePicker, select_keyframes
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.slam.between import BetweenPlacements, place_between
 from vgm_studio.slam.between_stream import STREAM_FROM, BetweenStream
@@ -23,6 +25,7 @@ from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.factors import fallback_edge, kept_edge
 from vgm_studio.slam.frontend import FrontEnd
 from vgm_studio.slam.odometry import scan_odometry
+from vgm_studio.slam.odometry_stream import Chunk, OdometryStream, ready
 from vgm_studio.slam.validation import (
     EdgeValidator,
     LocalMaps,
@@ -178,6 +181,145 @@ def _between_stream(
         return None
 
 
+@dataclass
+class _Made:
+    """What the odometry and the front end made; ``run``: the front end, its validator and
+    its edges. ``odometry_seconds``: from the start until the odometry's last pose."""
+
+    odometry: NDArray[np.float64]
+    keyframes: NDArray[np.int64]
+    run: tuple[FrontEnd, EdgeValidator, list[SlamEdge]]
+    odometry_seconds: float
+
+
+def _streams(log: ScanLog, config: SlamConfig, fe: FrontEndConfig) -> bool:
+    """Whether the odometry is made in a worker while the front end runs
+    (``odometry_stream``): for a long log with wheels (without, kiss-icp's lost steps are
+    judged by the run's model), where the run may use a second core, and not where the
+    validator needs the whole odometry first (``reference``) or false loops are drawn from
+    it."""
+    if len(log) < STREAM_FROM or fe.match_threads() < 2 or fe.false_loops:
+        return False
+    if multiprocessing.current_process().daemon or config.validation.validator == "reference":
+        return False
+    return all(s.odometry is not None for s in log.scans)
+
+
+def _front_end(
+    made: tuple[list[Scan], NDArray[np.float64], EdgeValidator],
+    config: SlamConfig,
+    fe: FrontEndConfig,
+) -> FrontEnd:
+    """The front end over (keyframe scans, their odometry, the validator)."""
+    scans, odometry, validator = made
+    graph, consistency, bar = config.graph, config.consistency, validator.loop_bar
+    return FrontEnd(scans, odometry, ScanMatcher(), validator, fe, graph, consistency, bar)
+
+
+def _front_end_after_odometry(
+    log: ScanLog,
+    usable: NDArray[np.bool_],
+    config: SlamConfig,
+    fe: FrontEndConfig,
+    on_pose: Callable[[int, NDArray[np.float64]], None] | None,
+    progress: bool,
+) -> _Made:
+    """The odometry of every scan, then the front end over its keyframes."""
+    t = time.perf_counter()
+    judge = pair_judge(config.validation)
+    odometry = scan_odometry(log.scans, progress=progress, judge=judge, on_pose=on_pose)
+    odometry_seconds = time.perf_counter() - t
+    pool = np.flatnonzero(usable)
+    keyframes = pool[select_keyframes(odometry[pool], fe.keyframe_distance, fe.keyframe_angle_deg)]
+    scans = [dataclasses.replace(log.scans[i], keep_points=True) for i in keyframes]
+    reference = dense_reference(log, odometry)
+    validator = EdgeValidator(
+        config.validation,
+        scans,
+        None if reference is None else reference[keyframes],
+        # A worker process where the run may use more than one core (not a one-CPU Ray task).
+        LocalMaps(log.scans, odometry, keyframes, ahead=fe.match_threads() > 1),
+    )
+    front = _front_end((scans, odometry[keyframes], validator), config, fe)
+    try:
+        edges = front.run(progress)
+    finally:
+        validator.close()
+    return _Made(odometry, keyframes, (front, validator, edges), odometry_seconds)
+
+
+def _front_end_streamed(
+    log: ScanLog,
+    usable: NDArray[np.bool_],
+    config: SlamConfig,
+    fe: FrontEndConfig,
+    on_pose: Callable[[int, NDArray[np.float64]], None] | None,
+    progress: bool,
+) -> _Made:
+    """The odometry made in a worker, the front end taking its keyframes as they come."""
+    t = time.perf_counter()
+    total = len(log)
+    odometry = np.full((total, 3), np.nan)
+    keyframes: list[int] = []
+    scans: list[Scan] = []
+    # Room for every usable scan: the front end reads the rows of the keyframes it has.
+    keyframe_odometry = np.full((int(usable.sum()), 3), np.nan)
+    step = (fe.keyframe_distance, fe.keyframe_angle_deg)
+    try:
+        # Started before the model loads: the odometry needs none.
+        stream = OdometryStream(log.scans, usable, step)
+    except (OSError, RuntimeError):  # no processes here (no /dev/shm, a sandbox)
+        return _front_end_after_odometry(log, usable, config, fe, on_pose, progress)
+    validator = EdgeValidator(
+        config.validation, scans, None, LocalMaps(log.scans, odometry, keyframes)
+    )
+    placing = validator.placing
+    stream.place_with(placing)
+    received = [0]
+
+    def chunks() -> Iterator[Chunk]:
+        try:
+            for chunk in stream.chunks():
+                received[0] = chunk.start + len(chunk.poses)
+                yield chunk
+        except RuntimeError:  # the worker died: the same odometry is made here
+            rest = scan_odometry(log.scans, progress=progress)[received[0] :]
+            yield Chunk(received[0], rest, {})
+
+    pick = KeyframePicker(fe.keyframe_distance, fe.keyframe_angle_deg)
+    done = [0.0]
+
+    def arrivals() -> Iterator[int]:
+        """Keyframes ready, after each chunk (``odometry_stream.ready``)."""
+        count = 0
+        for chunk in chunks():
+            end = chunk.start + len(chunk.poses)
+            odometry[chunk.start : end] = chunk.poses
+            for i in range(chunk.start, end):
+                if on_pose is not None:
+                    on_pose(i, odometry[i])
+                if usable[i] and pick(odometry[i]):
+                    keyframe_odometry[len(keyframes)] = odometry[i]
+                    keyframes.append(i)
+                    scans.append(dataclasses.replace(log.scans[i], keep_points=True))
+            validator.adopt(chunk.placed)
+            context = None if placing is None else placing[0]
+            while count < len(keyframes) and ready(keyframes[count], end, total, context):
+                count += 1
+            yield count
+        done[0] = time.perf_counter() - t
+
+    try:
+        waiting = arrivals()
+        first = next(count for count in waiting if count > 0)
+        front = _front_end((scans, keyframe_odometry, validator), config, fe)
+        edges = front.run(progress, itertools.chain([first], waiting))
+    finally:
+        validator.close()
+    kept = np.asarray(keyframes, dtype=np.int64)
+    return _Made(odometry, kept, (front, validator, edges), done[0])
+
+
 def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamResult:
     """Runs the whole pipeline on a log.
 
@@ -194,43 +336,18 @@ def run_slam(log: ScanLog, config: SlamConfig, progress: bool = True) -> SlamRes
         )
     check_loop_precision(config.validation)
     fe = config.front_end
-    stream = _between_stream(log, usable, fe)
-    t = time.perf_counter()
-    judge = pair_judge(config.validation)
-    on_pose = stream.pose if stream is not None else None
-    odometry = scan_odometry(log.scans, progress=progress, judge=judge, on_pose=on_pose)
-    seconds["odometry"] = time.perf_counter() - t
     if config.validation.validator == "none":
         # ``none`` keeps every edge: no sequential match goes out for disagreeing with the
         # odometry either, so ``before`` and ``after`` stay one graph.
         fe = dataclasses.replace(fe, sequential_slide_check=False)
-    pool = np.flatnonzero(usable)
-    keyframes = pool[select_keyframes(odometry[pool], fe.keyframe_distance, fe.keyframe_angle_deg)]
-    scans = [dataclasses.replace(log.scans[i], keep_points=True) for i in keyframes]
-    reference = dense_reference(log, odometry)
-    validator = EdgeValidator(
-        config.validation,
-        scans,
-        None if reference is None else reference[keyframes],
-        # A worker process where the run may use more than one core (not a one-CPU Ray task).
-        LocalMaps(log.scans, odometry, keyframes, ahead=fe.match_threads() > 1),
-    )
+    stream = _between_stream(log, usable, fe)
+    on_pose = stream.pose if stream is not None else None
     t = time.perf_counter()
-    front = FrontEnd(
-        scans,
-        odometry[keyframes],
-        ScanMatcher(),
-        validator,
-        fe,
-        config.graph,
-        config.consistency,
-        validator.loop_bar,
-    )
-    try:
-        edges = front.run(progress)
-    finally:
-        validator.close()
-    seconds["front_end"] = time.perf_counter() - t
+    run = _front_end_streamed if _streams(log, config, fe) else _front_end_after_odometry
+    made = run(log, usable, config, fe, on_pose, progress)
+    odometry, keyframes, front, validator, edges = made.odometry, made.keyframes, *made.run
+    seconds["odometry"] = made.odometry_seconds
+    seconds["front_end"] = time.perf_counter() - t - made.odometry_seconds
     running = front.estimate.poses
     t = time.perf_counter()
     odo_kf = odometry[keyframes]

@@ -40,13 +40,16 @@ def _start(inputs: Any) -> None:
     _mapper = LocalMapper(scans, poses, context, ScanMatcher(config))
 
 
-def _place(centres: list[int]) -> Placements:
+def placements(mapper: LocalMapper, centres: Sequence[int]) -> Placements:
     """Each centre's neighbours (its whole walk: what any pair may ask of it) placed."""
-    mapper = _mapper
-    assert mapper is not None  # set by _start
     return {
         (c, j): mapper.placed(c, j) for c in centres for j in walk(mapper.poses, c, mapper.context)
     }
+
+
+def _place(centres: list[int]) -> Placements:
+    assert _mapper is not None  # set by _start
+    return placements(_mapper, centres)
 
 
 class PlacingAhead:

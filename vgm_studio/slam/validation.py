@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.errors import InputError
+from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.matcher import MatchResult
 from vgm_studio.matching.reference_labels import reference_label
 from vgm_studio.model.context import Context, LocalMapper, Placements
@@ -49,7 +50,7 @@ class LocalMaps:
 
     scans: Sequence[Scan]
     poses: NDArray[np.float64]
-    keyframes: NDArray[np.int64]
+    keyframes: Sequence[int] | NDArray[np.int64]
     ahead: bool = False
 
 
@@ -87,7 +88,7 @@ class EdgeValidator:
         self._rate = _Rater(config) if config.validator in VALIDATOR_MODELS else None
         self.model: Validator | None = None if self._rate is None else self._rate.model
         # Set where the model reads local maps: each keyframe's, made once.
-        self._maps: tuple[LocalMapper, NDArray[np.int64]] | None = None
+        self._maps: tuple[LocalMapper, Sequence[int] | NDArray[np.int64]] | None = None
         self._ahead: PlacingAhead | None = None
         if self.model is not None and self.model.context.neighbours:
             if local is None:
@@ -144,6 +145,15 @@ class EdgeValidator:
         (None: the match did not hold); the local maps match the rest on demand."""
         if self._maps is not None:
             self._maps[0].adopt(placed)
+
+    @property
+    def placing(self) -> tuple[Context, MatchConfig] | None:
+        """How the local maps' neighbours are placed (``adopt`` takes placements made so
+        elsewhere); None where the model reads single scans."""
+        if self._maps is None:
+            return None
+        mapper = self._maps[0]
+        return mapper.context, mapper.match_config
 
     def close(self) -> None:
         """Stops the worker that places neighbours ahead, if any."""
