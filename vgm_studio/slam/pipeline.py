@@ -48,7 +48,9 @@ class SlamResult:
         before: The graph with every measured edge, optimised.
         after: The graph with the validated edges, optimised.
         threshold: The model's p(success) threshold (NaN for ``none`` and ``reference``).
-        seconds: Wall time per stage.
+        seconds: Wall time per stage. ``odometry`` runs until its last pose, ``front_end``
+            from there: where the odometry streams (``odometry_stream``) the front end ran
+            beside it, and this is what it took after.
         isam2_restarts: 1 when the running estimate had to rebuild iSAM2 with QR (see
             ``RunningEstimate.update``), else 0.
         after_edges: The factors ``after`` was optimised over: the kept edges and what stands
