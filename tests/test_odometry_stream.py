@@ -138,3 +138,45 @@ def test_the_odometry_worker_goes_with_a_parent_killed_outright(tmp_path):
 
     log = simulate(SimConfig(preset="loop", seed=2, num_beams=181, laps=0.3), tmp_path)
     assert_worker_goes_with_its_parent(_PARENT, log)
+
+
+_CTRL_C = """
+import sys, time
+import numpy as np
+from vgm_studio.datasets import open_log
+from vgm_studio.slam.between_stream import BetweenStream
+from vgm_studio.slam.odometry_stream import OdometryStream
+
+log = open_log(sys.argv[1])
+usable = np.ones(len(log), dtype=bool)
+step = (0.5, 20.0)
+workers = [OdometryStream(log.scans, usable, step), BetweenStream(log.scans, usable, step)]
+time.sleep(5)  # both started, and waiting on their queues
+print("ready", flush=True)
+try:
+    time.sleep(60)
+except KeyboardInterrupt:
+    print("interrupted", file=sys.stderr)
+    sys.exit(130)
+"""
+
+
+def test_ctrl_c_stops_a_run_with_one_line_not_a_traceback_from_each_worker(tmp_path):
+    import subprocess
+    import sys
+
+    log = simulate(SimConfig(preset="loop", seed=2, num_beams=181, laps=0.3), tmp_path)
+    run = subprocess.Popen(
+        [sys.executable, "-c", _CTRL_C, str(log)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    assert run.stdout is not None
+    assert run.stdout.readline().strip() == "ready"
+    os.killpg(run.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole group
+    _, err = run.communicate(timeout=60)
+    assert run.returncode == 130
+    assert "Traceback" not in err, err
+    assert err.strip() == "interrupted"

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import threading
 import time
 
@@ -23,7 +24,11 @@ def exit_with_parent() -> None:
     closes no pipe the worker waits on, and it would wait on.
 
     The parent is the one that spawned this worker, not the one it has now: a parent killed
-    while the worker was still starting has already left it to init."""
+    while the worker was still starting has already left it to init.
+
+    Ctrl-C at a terminal reaches the whole process group; the worker leaves it to its
+    parent, which stops it, rather than print a traceback of its own."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     spawned_by = multiprocessing.parent_process()
     parent = spawned_by.pid if spawned_by is not None else os.getppid()
 
