@@ -5,7 +5,7 @@ waiting for all of it. Here a worker makes the odometry and sends it back a chun
 the run picks its keyframes from each chunk as it would from the whole (``KeyframePicker``)
 and the front end takes a block as soon as the block's keyframes are *ready*: their poses
 known, and the poses of every scan a local map may walk to from them (``ready``). The worker
-also places each ready keyframe's neighbours for the local maps (``placing._placements``,
+also places each ready keyframe's neighbours for the local maps (``placing.placements``,
 what ``PlacingAhead`` does after the odometry otherwise). The front end sees the same inputs
 in the same blocks, so the run's edges and poses are those of a run that waited.
 
@@ -41,7 +41,7 @@ CHUNK = 256
 
 def ready(keyframe: int, known: int, total: int, context: Context | None) -> bool:
     """Whether scan ``keyframe``'s local map can be made with the first ``known`` of ``total``
-    poses: its walk (``context.walk``) reads at most ``context.scans`` scans past it."""
+    poses: its walk (``model.context.walk``) reads at most ``context.scans`` scans past it."""
     if context is None or context.neighbours <= 0:
         return keyframe < known
     return known >= min(total, keyframe + context.scans + 1)
