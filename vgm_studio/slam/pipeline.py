@@ -18,6 +18,7 @@ from vgm_studio.errors import InputError
 from vgm_studio.graph.pose_graph import GraphEdge, OptimizeResult, optimize
 from vgm_studio.matching.candidates import KeyframePicker, select_keyframes
 from vgm_studio.matching.matcher import ScanMatcher
+from vgm_studio.progress import counter
 from vgm_studio.slam.between import BetweenPlacements, place_between
 from vgm_studio.slam.between_stream import STREAM_FROM, BetweenStream
 from vgm_studio.slam.config import FrontEndConfig, SlamConfig
@@ -250,6 +251,18 @@ def _front_end_after_odometry(
     return _Made(odometry, keyframes, (front, validator, edges), odometry_seconds)
 
 
+def _chunks(stream: OdometryStream, log: ScanLog, progress: bool) -> Iterator[Chunk]:
+    """The stream's chunks; where its worker dies, the rest of the odometry made here (the
+    same: kiss-icp runs the scans from the first again)."""
+    received = 0
+    try:
+        for chunk in stream.chunks():
+            received = chunk.start + len(chunk.poses)
+            yield chunk
+    except RuntimeError:
+        yield Chunk(received, scan_odometry(log.scans, progress=progress)[received:], {})
+
+
 def _front_end_streamed(
     log: ScanLog,
     usable: NDArray[np.bool_],
@@ -277,25 +290,17 @@ def _front_end_streamed(
     )
     placing = validator.placing
     stream.place_with(placing)
-    received = [0]
-
-    def chunks() -> Iterator[Chunk]:
-        try:
-            for chunk in stream.chunks():
-                received[0] = chunk.start + len(chunk.poses)
-                yield chunk
-        except RuntimeError:  # the worker died: the same odometry is made here
-            rest = scan_odometry(log.scans, progress=progress)[received[0] :]
-            yield Chunk(received[0], rest, {})
-
     pick = KeyframePicker(fe.keyframe_distance, fe.keyframe_angle_deg)
     done = [0.0]
 
     def arrivals() -> Iterator[int]:
         """Keyframes ready, after each chunk (``odometry_stream.ready``)."""
         count = 0
-        for chunk in chunks():
+        # Its own count: the front end's, beside it, cannot say how far the odometry is.
+        bar = counter(total, "odometry", "scan", enabled=progress)
+        for chunk in _chunks(stream, log, progress):
             end = chunk.start + len(chunk.poses)
+            bar.update(len(chunk.poses))
             odometry[chunk.start : end] = chunk.poses
             for i in range(chunk.start, end):
                 if on_pose is not None:
@@ -309,6 +314,7 @@ def _front_end_streamed(
             while count < len(keyframes) and ready(keyframes[count], end, total, context):
                 count += 1
             yield count
+        bar.close()
         done[0] = time.perf_counter() - t
 
     try:
