@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.matching.candidates import KeyframePicker
-from vgm_studio.processes import exit_with_parent, spawn
+from vgm_studio.processes import exit_with_parent, start_worker
 from vgm_studio.slam.between import (
     ANCHOR_ANGLE_DEG,
     ANCHOR_DISTANCE,
@@ -56,17 +56,8 @@ class BetweenStream:
         self, scans: Sequence[Scan], usable: NDArray[np.bool_], keyframe_step: tuple[float, float]
     ) -> None:
         self._scans = scans
-        context = spawn()
-        self._to: Any = context.Queue()
-        # A worker that died before reading the scans leaves them in the queue's pipe; the
-        # run goes on without it, and must not wait at its exit to write them.
-        self._to.cancel_join_thread()
-        self._back: Any = context.Queue()
-        self._proc = context.Process(target=_work, args=(self._to, self._back), daemon=True)
-        self._proc.start()
-        # The scans go through the queue, whose thread writes them while the worker starts:
-        # as the process's arguments, the start waited on the worker's imports (1.2 s, Intel).
-        self._to.put(("scans", list(scans), usable, keyframe_step))
+        first = ("scans", list(scans), usable, keyframe_step)
+        self._proc, self._to, self._back = start_worker(_work, first)
         # Stopped however the run ends (an error before ``result``, say).
         self._stop = weakref.finalize(self, _stop, self._proc, self._to)
         self._start = 0

@@ -31,7 +31,7 @@ from vgm_studio.matching.candidates import KeyframePicker
 from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.model.context import Context, LocalMapper, Placements
-from vgm_studio.processes import exit_with_parent, spawn
+from vgm_studio.processes import exit_with_parent, start_worker
 from vgm_studio.slam.odometry import scan_odometry
 from vgm_studio.slam.placing import placements
 
@@ -75,13 +75,7 @@ class OdometryStream:
     def __init__(
         self, scans: Sequence[Scan], usable: NDArray[np.bool_], keyframe_step: tuple[float, float]
     ) -> None:
-        context = spawn()
-        self._to: Any = context.Queue()
-        self._to.cancel_join_thread()  # a worker that died must not hold the run's exit
-        self._back: Any = context.Queue()
-        self._proc = context.Process(target=_work, args=(self._to, self._back), daemon=True)
-        self._proc.start()
-        self._to.put((list(scans), usable, keyframe_step))
+        self._proc, self._to, self._back = start_worker(_work, (list(scans), usable, keyframe_step))
         self._stop = weakref.finalize(self, _stop, self._proc)
 
     def place_with(self, local: tuple[Context, MatchConfig] | None) -> None:
