@@ -168,15 +168,20 @@ def _usable(log: ScanLog) -> NDArray[np.bool_]:
     return np.array([np.count_nonzero(s.valid()) >= MIN_POINTS for s in log.scans])
 
 
+def _workers_pay(log: ScanLog, fe: FrontEndConfig) -> bool:
+    """Whether the run's workers (``between_stream``, ``odometry_stream``) may start: the run
+    may use a second core (not a one-CPU Ray task, nor a process pool's daemonic worker), and
+    the log is long enough to repay a worker's start."""
+    if len(log) < STREAM_FROM or fe.match_threads() < 2:
+        return False
+    return not multiprocessing.current_process().daemon
+
+
 def _between_stream(
     log: ScanLog, usable: NDArray[np.bool_], fe: FrontEndConfig
 ) -> BetweenStream | None:
-    """The worker that refines the anchors while the odometry runs, where the run may use a
-    second core (not a one-CPU Ray task, nor a process pool's daemonic worker) and the log is
-    long enough to repay the worker's start."""
-    if len(log) < STREAM_FROM or fe.match_threads() < 2:
-        return None
-    if multiprocessing.current_process().daemon:
+    """The worker that refines the anchors while the odometry runs (``_workers_pay``)."""
+    if not _workers_pay(log, fe):
         return None
     try:
         return BetweenStream(log.scans, usable, (fe.keyframe_distance, fe.keyframe_angle_deg))
@@ -201,9 +206,7 @@ def _streams(log: ScanLog, config: SlamConfig, fe: FrontEndConfig) -> bool:
     judged by the run's model), where the run may use a second core, and not where the
     validator needs the whole odometry first (``reference``) or false loops are drawn from
     it."""
-    if len(log) < STREAM_FROM or fe.match_threads() < 2 or fe.false_loops:
-        return False
-    if multiprocessing.current_process().daemon or config.validation.validator == "reference":
+    if not _workers_pay(log, fe) or fe.false_loops or config.validation.validator == "reference":
         return False
     return all(s.odometry is not None for s in log.scans)
 
@@ -290,6 +293,7 @@ def _front_end_streamed(
     )
     placing = validator.placing
     stream.place_with(placing)
+    context = None if placing is None else placing[0]
     pick = KeyframePicker(fe.keyframe_distance, fe.keyframe_angle_deg)
     done = [0.0]
 
@@ -310,7 +314,6 @@ def _front_end_streamed(
                     keyframes.append(i)
                     scans.append(dataclasses.replace(log.scans[i], keep_points=True))
             validator.adopt(chunk.placed)
-            context = None if placing is None else placing[0]
             while count < len(keyframes) and ready(keyframes[count], end, total, context):
                 count += 1
             yield count
