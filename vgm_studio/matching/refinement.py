@@ -27,11 +27,17 @@ class Target:
     grid of cells its nearest points are found through (``refine_kernel``)."""
 
     points: NDArray[np.float64]
-    normals: NDArray[np.float64]
     # The points and normals sorted by cell, with the grid the kernels read.
     _cells: tuple[Any, ...] = field(repr=False, compare=False)
     _normals: NDArray[np.float64] = field(repr=False, compare=False)
     _frame: NDArray[np.float64] = field(repr=False, compare=False)
+
+    @property
+    def normals(self) -> NDArray[np.float64]:
+        """(N, 2) each point's line normal, in the order of ``points``."""
+        normals = np.empty_like(self._normals)
+        normals[self._cells[1]] = self._normals
+        return normals
 
     @classmethod
     def build(cls, points: NDArray[np.float64], neighbors: int = 6) -> Target:
@@ -50,10 +56,7 @@ class Target:
             np.append(first, len(points)).astype(np.int64),
         )
         frame = np.array([origin[0], origin[1], _CELL, nx, ny], dtype=np.float64)
-        sorted_normals = line_normals(cells, frame, neighbors)
-        normals = np.empty_like(sorted_normals)
-        normals[order] = sorted_normals
-        return cls(points, normals, cells, sorted_normals, frame)
+        return cls(points, cells, line_normals(cells, frame, neighbors), frame)
 
 
 @dataclass(frozen=True)

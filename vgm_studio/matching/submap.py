@@ -163,7 +163,7 @@ class Submap:
         return cls.from_points(merged, resolution, stretches=drawn, **kw)  # type: ignore[arg-type]
 
     def target(self) -> Target:
-        """The points prepared for point-to-line refinement (k-d tree, normals), built once."""
+        """The points prepared for point-to-line refinement (grid of cells, normals), built once."""
         if not self._target:
             self._target.append(Target.build(self.points, self.normal_neighbors))
         return self._target[0]
