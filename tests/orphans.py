@@ -41,3 +41,20 @@ def _gone_within(pid: int, seconds: float) -> bool:
                 return True
         time.sleep(0.2)
     return False
+
+
+def stream_parent(module: str, name: str) -> str:
+    """A parent script for ``assert_worker_goes_with_its_parent`` that starts the worker of
+    ``module.name``, a stream made from a log's scans, which may be keyframes, and a
+    keyframe step (``BetweenStream``, ``OdometryStream``)."""
+    return f"""
+import sys, time
+import numpy as np
+from vgm_studio.datasets import open_log
+from {module} import {name}
+
+log = open_log(sys.argv[1])
+stream = {name}(log.scans, np.ones(len(log), dtype=bool), (0.5, 20.0))
+print(stream._proc.pid, flush=True)
+time.sleep(600)
+"""

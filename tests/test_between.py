@@ -111,27 +111,15 @@ def test_keyframes_the_worker_did_not_pick_are_placed_after_the_odometry(run, mo
     assert not set(placed.index.tolist()) & set(other.tolist())
 
 
-_PARENT = """
-import sys, time
-import numpy as np
-from vgm_studio.datasets import open_log
-from vgm_studio.slam.between_stream import BetweenStream
-
-log = open_log(sys.argv[1])
-stream = BetweenStream(log.scans, np.ones(len(log), dtype=bool), (0.5, 20.0))
-print(stream._proc.pid, flush=True)
-time.sleep(600)
-"""
-
-
 def test_the_worker_goes_with_a_parent_killed_outright_while_it_starts(tmp_path):
     """The worker starts without holding its parent up (the scans follow through its queue),
     so the parent can be killed before the worker has read them: it must not wait for them
     for ever."""
-    from orphans import assert_worker_goes_with_its_parent
+    from orphans import assert_worker_goes_with_its_parent, stream_parent
 
     log = simulate(SimConfig(preset="loop", seed=2, num_beams=181, laps=0.3), tmp_path)
-    assert_worker_goes_with_its_parent(_PARENT, log)
+    parent = stream_parent("vgm_studio.slam.between_stream", "BetweenStream")
+    assert_worker_goes_with_its_parent(parent, log)
 
 
 _DEAD_WORKER = """

@@ -120,24 +120,12 @@ def test_a_keyframe_is_ready_once_every_scan_its_local_map_may_walk_to_is_known(
     assert not odometry_stream.ready(100, 100, 10_000, Context(neighbours=0))
 
 
-_PARENT = """
-import sys, time
-import numpy as np
-from vgm_studio.datasets import open_log
-from vgm_studio.slam.odometry_stream import OdometryStream
-
-log = open_log(sys.argv[1])
-stream = OdometryStream(log.scans, np.ones(len(log), dtype=bool), (0.5, 20.0))
-print(stream._proc.pid, flush=True)
-time.sleep(600)
-"""
-
-
 def test_the_odometry_worker_goes_with_a_parent_killed_outright(tmp_path):
-    from orphans import assert_worker_goes_with_its_parent
+    from orphans import assert_worker_goes_with_its_parent, stream_parent
 
     log = simulate(SimConfig(preset="loop", seed=2, num_beams=181, laps=0.3), tmp_path)
-    assert_worker_goes_with_its_parent(_PARENT, log)
+    parent = stream_parent("vgm_studio.slam.odometry_stream", "OdometryStream")
+    assert_worker_goes_with_its_parent(parent, log)
 
 
 _CTRL_C = """
