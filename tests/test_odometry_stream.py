@@ -140,8 +140,9 @@ usable = np.ones(len(log), dtype=bool)
 step = (0.5, 20.0)
 workers = [OdometryStream(log.scans, usable, step), BetweenStream(log.scans, usable, step)]
 time.sleep(5)  # both started, and waiting on their queues
-print("ready", flush=True)
 try:
+    # "ready" inside the try: the test may press Ctrl-C the moment it reads the line.
+    print("ready", flush=True)
     time.sleep(60)
 except KeyboardInterrupt:
     print("interrupted", file=sys.stderr)
