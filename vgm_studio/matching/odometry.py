@@ -29,6 +29,52 @@ def kiss_config(config: MatchConfig) -> KISSConfig:
     return kiss
 
 
+class KissOdometry(KissICP):  # type: ignore[misc]  # kiss-icp ships no types
+    """kiss-icp's pipeline whose local map drops far points once the sensor has moved.
+
+    kiss-icp walks its whole voxel map after every frame to drop the voxels beyond
+    ``max_range``. A 2D scan adds only a few hundred points, so over a building's map that walk
+    costs more than the frame's own matching and adding (Intel: 4.1 of 12.2 s of odometry).
+    A voxel only gets farther than ``max_range`` by the sensor moving away from it, so the walk
+    is made when the sensor is ``sweep`` metres from where the last one was made: the map
+    keeps points up to ``max_range + sweep`` instead of ``max_range``, which at 30 m changes
+    nothing a 0.9 m correspondence gate can see.
+    """
+
+    last_pose: NDArray[np.float64]
+    last_delta: NDArray[np.float64]
+
+    def __init__(self, config: KISSConfig, sweep: float = 0.5) -> None:
+        super().__init__(config)
+        self.sweep = sweep
+        self._swept: NDArray[np.float64] | None = None
+
+    def register_frame(
+        self, frame: NDArray[np.float64], timestamps: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """kiss-icp's ``register_frame``, its map updated as the class says."""
+        frame = self.preprocessor.preprocess(frame, timestamps, self.last_delta)
+        source, frame_downsample = self.voxelize(frame)
+        sigma = self.adaptive_threshold.get_threshold()
+        initial_guess = self.last_pose @ self.last_delta
+        new_pose = self.registration.align_points_to_map(
+            points=source,
+            voxel_map=self.local_map,
+            initial_guess=initial_guess,
+            max_correspondance_distance=3 * sigma,
+            kernel=sigma,
+        )
+        self.adaptive_threshold.update_model_deviation(np.linalg.inv(initial_guess) @ new_pose)
+        rotation, origin = new_pose[:3, :3], new_pose[:3, 3]
+        self.local_map.add_points(frame_downsample @ rotation.T + origin)
+        if self._swept is None or np.linalg.norm(origin - self._swept) >= self.sweep:
+            self.local_map.remove_far_away_points(origin)
+            self._swept = origin.copy()
+        self.last_delta = np.linalg.inv(self.last_pose) @ new_pose
+        self.last_pose = new_pose
+        return frame, source
+
+
 def lidar_odometry(
     scans: Sequence[Scan], config: MatchConfig | None = None, progress: bool = True
 ) -> NDArray[np.float64]:
@@ -37,7 +83,7 @@ def lidar_odometry(
     Returns:
         (N, 3) sensor poses (x, y, θ) relative to the first scan.
     """
-    pipeline = KissICP(kiss_config(config or MatchConfig()))
+    pipeline = KissOdometry(kiss_config(config or MatchConfig()))
     poses = np.zeros((len(scans), 3))
     for i, scan in enumerate(track(scans, "odometry", "scan", enabled=progress)):
         pts = scan.points()

@@ -38,7 +38,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from kiss_icp.kiss_icp import KissICP
 from numpy.typing import NDArray
 
 from vgm_studio.core import se2
@@ -52,7 +51,7 @@ from vgm_studio.matching.branch_bound import (
 )
 from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.matcher import MatchResult
-from vgm_studio.matching.odometry import kiss_config
+from vgm_studio.matching.odometry import KissOdometry, kiss_config
 from vgm_studio.matching.refinement import Refinement, refine_with
 from vgm_studio.matching.registration import as_3d, pose_to_4x4
 from vgm_studio.matching.submap import Submap
@@ -129,7 +128,7 @@ def scan_odometry(
     """
     config = config or MatchConfig()
     recovery = recovery or Recovery()
-    pipeline = KissICP(kiss_config(config))
+    pipeline = KissOdometry(kiss_config(config))
     wheels = all(s.odometry is not None for s in scans)
     poses = np.zeros((len(scans), 3))
     previous: Scan | None = None
@@ -155,7 +154,7 @@ def scan_odometry(
 
 
 def _recover(
-    pipeline: KissICP,
+    pipeline: KissOdometry,
     pair: tuple[Scan, Scan],
     pts: NDArray[np.float64],
     last: NDArray[np.float64],
