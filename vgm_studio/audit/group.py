@@ -16,7 +16,6 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from vgm_studio.core import se2
 from vgm_studio.graph.config import GraphConfig
@@ -24,7 +23,7 @@ from vgm_studio.graph.pose_graph import GraphEdge, RunningEstimate
 from vgm_studio.slam.config import ConsistencyConfig
 from vgm_studio.slam.consistency import Loop, consistent, cycle_chi2s
 from vgm_studio.slam.edges import SlamEdge
-from vgm_studio.slam.uncertainty import UncertaintyGraph
+from vgm_studio.slam.uncertainty import UncertaintyGraph, chi2_gate
 
 # A tie between consecutive vertices that no sequential edge joins: present so the chain is
 # one graph, too wide to say anything of where the vertex is.
@@ -145,7 +144,7 @@ def check_loops(
         if closed:
             estimate.update(extra_iterations=2)
     grow.to(len(poses))
-    gate = float(chi2.ppf(config.probability, 3))
+    gate = chi2_gate(config.probability, 3)
     failed = [i for i, e in enumerate(edges) if e.kind == "loop" and not e.validated]
     # Support comes from the loops the group check kept and from the other failed loops: a
     # revisit the validator is unsure of throughout still agrees with itself.

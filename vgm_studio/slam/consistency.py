@@ -41,12 +41,11 @@ from itertools import combinations
 import networkx as nx
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from vgm_studio.core import se2
 from vgm_studio.core.cliques import largest_clique_size
 from vgm_studio.slam.config import ConsistencyConfig
-from vgm_studio.slam.uncertainty import Relative, UncertaintyGraph
+from vgm_studio.slam.uncertainty import Relative, UncertaintyGraph, chi2_gate
 
 # The estimate's two votes: sure of what its widened gate holds, likely of what its gate holds.
 _SURE, _LIKELY = -1, -2
@@ -90,7 +89,7 @@ def consistent(
         return np.zeros(0, dtype=bool)
     ends = sorted({x for loop in loops for x in (loop.a, loop.b)})
     rel = dict(zip(ends, graph.relative(ends, len(poses)), strict=True))
-    gate = float(chi2.ppf(config.probability, 3))
+    gate = chi2_gate(config.probability, 3)
     votes = nx.Graph()
     # A loop weighs 2 and a vote of w loops 2w + 1: a group of loops can never tie with the
     # estimate, which would leave the choice to whichever clique networkx happens to find.

@@ -30,14 +30,13 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.matching.descriptor import PlaceIndex
 from vgm_studio.slam.config import FrontEndConfig
 from vgm_studio.slam.edges import EdgeSource
-from vgm_studio.slam.uncertainty import Relative, UncertaintyGraph
+from vgm_studio.slam.uncertainty import Relative, UncertaintyGraph, chi2_gate
 
 # At most this many scans in a trail: where keyframes are close (a robot turning on the
 # spot), a few metres of path would otherwise hold hundreds.
@@ -82,7 +81,7 @@ def window_candidates(
     keyframes = [b for b in block if b - config.loop_min_gap >= 0]
     if not keyframes or config.loops_per_keyframe == 0:
         return []
-    gate = float(chi2.ppf(config.loop_gate, 2))
+    gate = chi2_gate(config.loop_gate, 2)
     # With no uncertainty the gate reaches exactly loop_radius.
     reach_var = config.loop_radius**2 / gate
     out: list[Candidate] = []
