@@ -21,7 +21,6 @@ from vgm_studio.maps.config import MapConfig
 from vgm_studio.maps.occupancy import OccupancyGrid
 from vgm_studio.maps.png import write_maps
 from vgm_studio.maps.ros_map import write_ros_map
-from vgm_studio.recording import write_recording
 from vgm_studio.services import Say, Voice
 from vgm_studio.slam.pipeline import SlamResult
 from vgm_studio.slam.report import LOOP_COLOURS, loop_segments, run_maps
@@ -95,6 +94,9 @@ def _write_maps_and_recording(
         for path in write_ros_map(outputs.ros_map, maps["after"]):
             say(f"wrote {path}")
     if outputs.record is not None or outputs.spawn:
+        # Here, not at the top: rerun's import costs every run half a second, most never record.
+        from vgm_studio.recording import write_recording
+
         t = time.perf_counter()
         write_recording(log, result, maps or {}, errors, outputs.record, outputs.spawn)
         result.seconds["recording"] = time.perf_counter() - t
