@@ -66,3 +66,38 @@ def test_second_look_is_recorded_and_checked_on_the_command_line(office, tmp_pat
     assert stop.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--second-look" in err[0]
+
+
+def test_a_validator_on_one_thread_says_the_same_and_gives_torchs_threads_back(office):
+    """SLAM runs the network on one thread (the other cores are the loop threads' and the
+    workers'): the same p(success) to the bit, and torch's count as it was after ``close``."""
+    import torch
+
+    log = open_log(office).scans
+    keyframes = np.arange(0, len(log), 4)[:30]
+    scans = [log[i] for i in keyframes]
+    truth = np.array([s.reference for s in scans])
+    local = LocalMaps(log, np.array([s.reference for s in log]), keyframes)
+    matcher = ScanMatcher()
+    edges = [
+        SlamEdge("loop", k - 1, k, step, matcher.match(scans[k - 1], scans[k], step))
+        for k in range(1, len(scans))
+        for step in [se2.between(truth[k - 1], truth[k])]
+    ]
+    config = ValidationConfig(model=BUNDLED_MODEL)
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        p = {}
+        for threads in (None, 1):
+            judged = [dataclasses.replace(e) for e in edges]
+            validator = EdgeValidator(config, scans, local=local, network_threads=threads)
+            assert torch.get_num_threads() == (threads or 2)
+            validator(judged)
+            validator.close()
+            assert torch.get_num_threads() == 2
+            p[threads] = np.array([e.p_success for e in judged])
+        assert np.array_equal(p[None], p[1])
+        assert len(np.unique(np.round(p[1], 2))) > 1  # pairs the model tells apart
+    finally:
+        torch.set_num_threads(before)

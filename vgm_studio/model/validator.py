@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -304,6 +305,17 @@ class Validator:
         ``second_look`` looks again at the pairs the network is unsure of."""
         path = Path(path)
         return cls(load_checkpoint(path, expect_vgm), device, path, second_look)
+
+    @contextmanager
+    def threads(self, count: int) -> Iterator[None]:
+        """The network runs on ``count`` of torch's threads inside the block; torch's count is
+        the process's, so the one before is put back after."""
+        before = torch.get_num_threads()
+        torch.set_num_threads(count)
+        try:
+            yield
+        finally:
+            torch.set_num_threads(before)
 
     @property
     def metrics(self) -> dict[str, Any]:

@@ -27,12 +27,7 @@ from vgm_studio.slam.factors import fallback_edge, kept_edge
 from vgm_studio.slam.frontend import FrontEnd
 from vgm_studio.slam.odometry import scan_odometry
 from vgm_studio.slam.odometry_stream import Chunk, OdometryStream, ready
-from vgm_studio.slam.validation import (
-    EdgeValidator,
-    LocalMaps,
-    check_loop_precision,
-    pair_judge,
-)
+from vgm_studio.slam.validation import EdgeValidator, LocalMaps, check_loop_precision, pair_judge
 
 MIN_POINTS = 10
 
@@ -245,6 +240,7 @@ def _front_end_after_odometry(
         None if reference is None else reference[keyframes],
         # A worker process where the run may use more than one core (not a one-CPU Ray task).
         LocalMaps(log.scans, odometry, keyframes, ahead=fe.match_threads() > 1),
+        network_threads=1,  # the cores are the loop threads' and the workers'
     )
     front = _front_end((scans, odometry[keyframes], validator), config, fe)
     try:
@@ -288,9 +284,8 @@ def _front_end_streamed(
         stream = OdometryStream(log.scans, usable, step)
     except (OSError, RuntimeError):  # no processes here (no /dev/shm, a sandbox)
         return _front_end_after_odometry(log, usable, config, fe, on_pose, progress)
-    validator = EdgeValidator(
-        config.validation, scans, None, LocalMaps(log.scans, odometry, keyframes)
-    )
+    local = LocalMaps(log.scans, odometry, keyframes)
+    validator = EdgeValidator(config.validation, scans, None, local, network_threads=1)
     placing = validator.placing
     stream.place_with(placing)
     context = None if placing is None else placing[0]

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -63,6 +64,9 @@ class EdgeValidator:
         reference: (K, 3) reference poses of the keyframes (``reference`` only).
         local: Where keyframes' neighbours are found; needed by a model trained on local
             maps, unused by others.
+        network_threads: torch's threads for the network until ``close`` (None: as they
+            are). A SLAM run's other threads and workers hold the other cores, and torch's
+            hand-offs between its own only cost CPU there (the same logits).
 
     Raises:
         InputError: The checkpoint is missing, unreadable or of another model, or
@@ -75,8 +79,10 @@ class EdgeValidator:
         scans: Sequence[Scan],
         reference: NDArray[np.float64] | None = None,
         local: LocalMaps | None = None,
+        network_threads: int | None = None,
     ) -> None:
         self.config = config
+        self._held = ExitStack()
         self._scans = scans
         self._reference = reference
         if config.validator == "reference" and reference is None:
@@ -103,6 +109,8 @@ class EdgeValidator:
             if self.model is None:
                 raise InputError(None, "--loop-precision needs a model validator")
             self.precision_cut = self.model.threshold_at_precision(config.loop_precision)
+        if self.model is not None and network_threads is not None:
+            self._held.enter_context(self.model.threads(network_threads))
 
     def __call__(self, edges: Sequence[SlamEdge]) -> None:
         if not edges:
@@ -156,9 +164,11 @@ class EdgeValidator:
         return mapper.context, mapper.match_config
 
     def close(self) -> None:
-        """Stops the worker that places neighbours ahead, if any."""
+        """Stops the worker that places neighbours ahead, if any, and gives torch back its
+        thread count."""
         if self._ahead is not None:
             self._ahead.close()
+        self._held.close()
 
     @property
     def context(self) -> Context:
