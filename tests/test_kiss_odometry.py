@@ -28,7 +28,7 @@ def scans(tmp_path_factory):
     return open_log(simulate(world, Path(folder))).scans
 
 
-def _run(pipeline: KissICP, scans, every=None):  # type: ignore[no-untyped-def]
+def _run(pipeline: KissICP, scans, every=None):
     """Registers every scan, predicted by its wheels; yields after each frame."""
     poses = []
     for i, scan in enumerate(scans):
@@ -43,7 +43,7 @@ def _run(pipeline: KissICP, scans, every=None):  # type: ignore[no-untyped-def]
     return np.array(poses)
 
 
-def _step_errors(poses, scans):  # type: ignore[no-untyped-def]
+def _step_errors(poses, scans):
     """Each step's translation error against the simulated truth, metres."""
     truth = np.array([scan.reference for scan in scans])
     steps = se2.between(poses[:-1], poses[1:])

@@ -26,21 +26,31 @@ def office(tmp_path_factory) -> Path:
     return simulate(SimConfig(preset="office", seed=6, num_beams=181, laps=0.3), folder)
 
 
+def _true_pairs(office, count):
+    """The office's first ``count`` keyframes (every fourth scan), their local maps, and each
+    consecutive pair's true step and its match from there.
+
+    The bundled model reads local maps: each keyframe's neighbours are placed from the truth.
+    """
+    log = open_log(office).scans
+    keyframes = np.arange(0, len(log), 4)[:count]
+    scans = [log[i] for i in keyframes]
+    truth = np.array([s.reference for s in scans])
+    local = LocalMaps(log, np.array([s.reference for s in log]), keyframes)
+    matcher = ScanMatcher()
+    steps = [se2.between(truth[k - 1], truth[k]) for k in range(1, len(scans))]
+    matches = [matcher.match(scans[k - 1], scans[k], step) for k, step in enumerate(steps, 1)]
+    return scans, local, steps, matches
+
+
 def test_the_slam_validator_looks_again_only_at_the_edges_it_is_unsure_of(office):
     """Matches slid by 0–0.5 m along x, so that the bundled model is sure of some and
     unsure of others: with ``second_look`` 4 the sure ones keep their p(success) to the bit
     and every unsure one moves."""
-    log = open_log(office).scans
-    keyframes = np.arange(0, len(log), 4)[:40]
-    scans = [log[i] for i in keyframes]
-    truth = np.array([s.reference for s in scans])
-    # The bundled model reads local maps: each keyframe's neighbours placed from the truth.
-    local = LocalMaps(log, np.array([s.reference for s in log]), keyframes)
-    matcher = ScanMatcher()
+    scans, local, steps, matches = _true_pairs(office, 40)
     edges = []
-    for k, slide in zip(range(1, len(scans)), np.linspace(0.0, 0.5, len(scans) - 1), strict=True):
-        step = se2.between(truth[k - 1], truth[k])
-        match = matcher.match(scans[k - 1], scans[k], step)
+    slides = np.linspace(0.0, 0.5, len(steps))
+    for k, (step, match, slide) in enumerate(zip(steps, matches, slides, strict=True), start=1):
         slid = dataclasses.replace(match, estimate=se2.compose(step, np.array([slide, 0, 0])))
         edges.append(SlamEdge("loop", k - 1, k, step, slid))
 
@@ -73,16 +83,10 @@ def test_a_validator_on_one_thread_says_the_same_and_gives_torchs_threads_back(o
     workers'): the same p(success) to the bit, and torch's count as it was after ``close``."""
     import torch
 
-    log = open_log(office).scans
-    keyframes = np.arange(0, len(log), 4)[:30]
-    scans = [log[i] for i in keyframes]
-    truth = np.array([s.reference for s in scans])
-    local = LocalMaps(log, np.array([s.reference for s in log]), keyframes)
-    matcher = ScanMatcher()
+    scans, local, steps, matches = _true_pairs(office, 30)
     edges = [
-        SlamEdge("loop", k - 1, k, step, matcher.match(scans[k - 1], scans[k], step))
-        for k in range(1, len(scans))
-        for step in [se2.between(truth[k - 1], truth[k])]
+        SlamEdge("loop", k - 1, k, step, match)
+        for k, (step, match) in enumerate(zip(steps, matches, strict=True), start=1)
     ]
     config = ValidationConfig(model=BUNDLED_MODEL)
     before = torch.get_num_threads()
