@@ -47,13 +47,19 @@ def test_levels_hold_the_max_of_the_block_starting_at_each_cell():
     rng = np.random.default_rng(0)
     sub = Submap.from_points(rng.uniform(0, 3, size=(60, 2)), 0.05, depth=4)
     base = sub.levels[0]
-    nx, ny = base.shape
     assert base.max() == PEAK
-    for h in range(1, 5):
-        for _ in range(50):
-            i, j = int(rng.integers(0, nx)), int(rng.integers(0, ny))
-            block = base[i : i + 2**h, j : j + 2**h]
-            assert sub.levels[h][i, j] == block.max()
+    # Every cell of every level, the blocks running past the far edges read as zeros: the
+    # levels are computed only where a block reaches the points' cells.
+    for points, depth in ((rng.uniform(0, 3, size=(60, 2)), 4), (rng.normal(size=(9, 2)), 6)):
+        sub = Submap.from_points(points, 0.05, depth=depth)
+        base = sub.levels[0]
+        nx, ny = base.shape
+        for h in range(1, depth + 1):
+            size = 2**h
+            wide = np.zeros((nx + size, ny + size), np.uint8)
+            wide[:nx, :ny] = base
+            blocks = np.lib.stride_tricks.sliding_window_view(wide, (size, size))
+            assert np.array_equal(sub.levels[h], blocks[:nx, :ny].max(axis=(2, 3)))
     # The padding is wider than the largest block, so the outermost cells are empty on all levels.
     for level in sub.levels:
         assert level[0].max() == 0 and level[-1].max() == 0
@@ -246,7 +252,11 @@ def test_the_likelihood_grid_equals_a_transform_over_the_whole_grid():
         free[cells[:, 0], cells[:, 1]] = 0
         dist = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_5)
         full = np.where(dist > 3.0 * sigma, 0.0, PEAK * np.exp(-0.5 * (dist / sigma) ** 2))
-        assert np.array_equal(_likelihood(cells, shape, sigma), np.rint(full).astype(np.uint8))
+        grid = np.zeros(shape, dtype=np.uint8)
+        (x0, y0), (x1, y1) = _likelihood(cells, shape, sigma, out=grid)
+        assert np.array_equal(grid, np.rint(full).astype(np.uint8))
+        # Nothing outside the box it returns scores.
+        assert grid.sum() == grid[x0:x1, y0:y1].sum()
 
 
 def test_scores_gathered_in_chunks_equal_one_gather_of_every_candidate(office):
