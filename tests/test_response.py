@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from vgm_studio.matching.response import response_covariance
+from vgm_studio.matching.response import response_surface, score_at
 from vgm_studio.matching.submap import Submap
 
 
@@ -25,8 +25,11 @@ def _spread(walls: np.ndarray, seen: float) -> np.ndarray:
     """The spread of the part of ``walls`` within ``seen`` of the origin, on all of them."""
     submap = Submap.from_points(walls, 0.05)
     scan = walls[np.max(np.abs(walls), axis=1) <= seen]
-    cov = response_covariance(submap, scan, np.zeros(3), 0.5, math.radians(3.0), 3.0)
+    found = response_surface(submap, scan, np.zeros(3), 0.5, math.radians(3.0), 3.0)
+    cov = found.covariance
     assert cov is not None
+    # The surface's centre is the pose itself.
+    assert found.score == score_at(submap, scan, np.zeros(3)) > 0
     return np.sqrt(np.diag(cov))
 
 
@@ -47,4 +50,18 @@ def test_a_closed_room_pins_the_scan_both_ways():
 def test_a_scan_off_the_grid_has_no_spread():
     submap = Submap.from_points(_walls(3.0, ends=True), 0.05)
     far = _walls(3.0, ends=True) + 50.0
-    assert response_covariance(submap, far, np.zeros(3), 0.5, 0.05, 3.0) is None
+    found = response_surface(submap, far, np.zeros(3), 0.5, 0.05, 3.0)
+    assert found.covariance is None and found.score == 0.0
+
+
+def test_the_score_at_the_pose_is_the_surfaces_centre():
+    """A match's score at its pose comes from the surface it has just sampled; it must be
+    what ``score_at`` scores there, wherever the pose falls in its cell and whatever part of
+    the scan is off the grid."""
+    walls = _walls(3.0, ends=True)
+    submap = Submap.from_points(walls, 0.05)
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        pose = np.array([*rng.uniform(-1.6, 1.6, 2), rng.uniform(-0.3, 0.3)])
+        found = response_surface(submap, walls, pose, 0.5, math.radians(3.0), 3.0)
+        assert found.score == score_at(submap, walls, pose)

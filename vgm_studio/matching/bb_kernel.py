@@ -30,6 +30,24 @@ def _score(level: Any, base: Any, a: int, shift: int) -> int:
 
 
 @kernel
+def _scores(level: Any, base: Any, a: Any, shift: Any) -> Any:
+    total = np.empty(a.shape[0], np.int32)
+    for k in range(a.shape[0]):
+        total[k] = _score(level, base, a[k], shift[k])
+    return total
+
+
+def scores(
+    level: NDArray[np.uint8], base: NDArray[np.intp], a: NDArray[np.intp], shift: NDArray[np.intp]
+) -> NDArray[np.int32]:
+    """Sum of ``level`` under the scan at each candidate: angle ``a[k]``, its cells moved by
+    the flat ``shift[k]`` (x · stride + y). The sums are integers, so they equal numpy's
+    gather (``branch_bound._scores``, brute force's) to the last bit."""
+    out: NDArray[np.int32] = _scores(level, base, a, shift)
+    return out
+
+
+@kernel
 def _before(a: int, x: int, y: int, ba: int, bx: int, by: int) -> bool:
     """(a, x, y) comes before (ba, bx, by): brute force's tie-break, lowest index first."""
     return a < ba or (a == ba and (x < bx or (x == bx and y < by)))

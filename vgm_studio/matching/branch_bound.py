@@ -238,7 +238,11 @@ def surface(
     a, gx, gy = (
         g.ravel() for g in np.meshgrid(np.arange(len(w.angles)), offsets, offsets, indexing="ij")
     )
-    scores = _scores(w, 0, a, gx, gy).reshape(len(w.angles), len(offsets), len(offsets))
+    # Compiled: a match's spread scores two such surfaces (``response.py``), and the numpy
+    # gather's scratch and passes cost more than the sums over so few poses.
+    shift = (gx * w.stride + gy).astype(np.intp)
+    scores = bb_kernel.scores(w.levels[0], w.base, a.astype(np.intp), shift)
+    scores = scores.reshape(len(w.angles), len(offsets), len(offsets))
     return w.angles, offsets.astype(np.float64) * submap.resolution, scores
 
 

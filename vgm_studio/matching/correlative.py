@@ -28,7 +28,7 @@ from vgm_studio.matching.branch_bound import (
 from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.matcher import MatchResult
 from vgm_studio.matching.refinement import Target, refine_with
-from vgm_studio.matching.response import response_covariance, score_at
+from vgm_studio.matching.response import response_surface, score_at
 from vgm_studio.matching.submap import Submap
 
 __all__ = [
@@ -59,7 +59,7 @@ class CorrelativeConfig:
         match: The refinement's settings (iterations, gates, inlier distance, degeneracy), the
             same as the pairwise matcher's.
         spread_temperature: τ of the score surface's covariance around the match
-            (``response.response_covariance``), in points; None: not measured. The graph
+            (``response.response_surface``), in points; None: not measured. The graph
             adds it to the refinement's covariance (``slam.factors.matcher_covariance``).
             3: with 1, Olson's independent points, every row was as good or worse (Örebro
             0.056 → 0.060 m, the infinite corridor 0.047 → 0.050).
@@ -91,10 +91,16 @@ class LoopMatcher:
         self.config = config or CorrelativeConfig()
         # Keyed by id(scan); the scan is kept alongside so its id cannot be reused.
         self._targets: dict[int, tuple[Scan, Target | None]] = {}
+        self._points: dict[int, tuple[Scan, NDArray[np.float64]]] = {}
 
     def points(self, scan: Scan) -> NDArray[np.float64]:
-        pts = scan.points()
-        return pts[np.hypot(pts[:, 0], pts[:, 1]) <= self.config.max_range]
+        """The scan's points in range, cut once: a keyframe is matched many times."""
+        cached = self._points.get(id(scan))
+        if cached is None:
+            pts = scan.points()
+            cached = (scan, pts[np.hypot(pts[:, 0], pts[:, 1]) <= self.config.max_range])
+            self._points[id(scan)] = cached
+        return cached[1]
 
     def _target(self, scan: Scan) -> Target | None:
         cached = self._targets.get(id(scan))
@@ -108,6 +114,7 @@ class LoopMatcher:
     def forget(self, scan: Scan) -> None:
         """Drops a target scan's cached structures (for long logs streamed through)."""
         self._targets.pop(id(scan), None)
+        self._points.pop(id(scan), None)
 
     def search(
         self,
@@ -194,14 +201,10 @@ class LoopMatcher:
         c = self.config
         if c.spread_temperature is None:
             return None, None
-        spread = response_covariance(
-            submap,
-            points,
-            estimate,
-            c.spread_linear,
-            math.radians(c.spread_angular_deg),
-            c.spread_temperature,
+        angular = math.radians(c.spread_angular_deg)
+        found = response_surface(
+            submap, points, estimate, c.spread_linear, angular, c.spread_temperature
         )
-        at_estimate = score_at(submap, points, estimate)
+        at_estimate = found.score
         share = score_at(submap, points, guess) / at_estimate if at_estimate > 0 else None
-        return spread, share
+        return found.covariance, share

@@ -40,7 +40,7 @@ class MatchResult:
             grid pose, 0..1); None from this pairwise matcher. The loop matcher reports its grid
             pose, and how far that moved and turned from the guess, in the ``kiss_*`` fields.
         spread: The loop matcher's covariance of its score's surface around the estimate
-            (``response.response_covariance``), in scan a's frame; None where not measured.
+            (``response.response_surface``), in scan a's frame; None where not measured.
         guess_share: The loop matcher's score at the guess over its score at the estimate:
             how much of the match's support the guess keeps; None where not measured.
     """

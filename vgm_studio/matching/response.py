@@ -16,6 +16,8 @@ the spread (a flat corridor reads as the window's own width, not as infinite).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -23,15 +25,29 @@ from vgm_studio.matching.branch_bound import SearchWindow, surface
 from vgm_studio.matching.submap import PEAK, Submap
 
 
-def response_covariance(
+@dataclass(frozen=True)
+class Response:
+    """The score's surface around a match.
+
+    Attributes:
+        covariance: (x, y, θ) covariance in the submap's frame; None where no point falls on
+            the grid near the pose.
+        score: The score at the pose itself, as ``score_at`` gives it (the surface's centre).
+    """
+
+    covariance: NDArray[np.float64] | None
+    score: float
+
+
+def response_surface(
     submap: Submap,
     points: NDArray[np.float64],
     pose: NDArray[np.float64],
     linear: float,
     angular: float,
     temperature: float,
-) -> NDArray[np.float64] | None:
-    """The (x, y, θ) covariance of the score's surface around ``pose``, in the submap's frame.
+) -> Response:
+    """The covariance of the score's surface around ``pose``, and the score at ``pose``.
 
     Args:
         submap: The grid the scan was matched on.
@@ -40,22 +56,21 @@ def response_covariance(
         linear: Half-width of the translations sampled, metres.
         angular: Half-width of the headings sampled, radians.
         temperature: τ, in points (see the module's docstring).
-
-    Returns:
-        None where no point falls on the grid near ``pose``.
     """
     if len(points) == 0:
-        return None
+        return Response(None, 0.0)
     pose = np.asarray(pose, dtype=np.float64)
     _, shifts, plane = surface(submap, points, pose, SearchWindow(linear, 0.0))
     if plane.max() <= 0:
-        return None
+        return Response(None, 0.0)
+    # The plane's centre is the pose itself, scored as ``score_at`` scores it.
+    centre = float(plane[0, len(shifts) // 2, len(shifts) // 2]) / (PEAK * len(points))
     gx, gy = (g.ravel() for g in np.meshgrid(shifts, shifts, indexing="ij"))
     cov = np.zeros((3, 3))
     cov[:2, :2] = _moment(np.column_stack([gx, gy]), plane.ravel(), temperature)
     headings, _, line = surface(submap, points, pose, SearchWindow(0.0, angular))
     cov[2, 2] = _moment((headings - pose[2])[:, None], line.ravel(), temperature)[0, 0]
-    return cov
+    return Response(cov, centre)
 
 
 def _moment(
