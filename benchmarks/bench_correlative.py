@@ -36,7 +36,7 @@ CORRECTED = ("intel/intel.gfs.log", *(f"radish-corrected/{n}-corrected.log" for 
 
 
 def _keyframes(ref):
-    from vgm_studio.matching.candidates import select_keyframes
+    from vgm_studio.matching.keyframes import select_keyframes
 
     return select_keyframes(ref, 1.0, 30.0)
 

@@ -9,9 +9,9 @@ import pytest
 
 from vgm_studio.core import se2
 from vgm_studio.datasets import open_log
-from vgm_studio.matching.candidates import select_keyframes
 from vgm_studio.matching.correlative import LoopMatcher, SearchWindow
 from vgm_studio.matching.descriptor import DescriptorConfig, PlaceIndex, describe
+from vgm_studio.matching.keyframes import select_keyframes
 from vgm_studio.matching.submap import Submap
 from vgm_studio.simulation.simulate import SimConfig, simulate
 from vgm_studio.slam.config import FrontEndConfig

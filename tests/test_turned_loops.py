@@ -18,8 +18,8 @@ import pytest
 from vgm_studio.core import se2
 from vgm_studio.datasets import open_log
 from vgm_studio.graph.config import GraphConfig
-from vgm_studio.matching.candidates import select_keyframes
 from vgm_studio.matching.config import MatchConfig
+from vgm_studio.matching.keyframes import select_keyframes
 from vgm_studio.matching.matcher import MatchResult, ScanMatcher
 from vgm_studio.matching.submap import Submap
 from vgm_studio.simulation.simulate import SimConfig, simulate

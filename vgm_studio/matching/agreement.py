@@ -28,8 +28,8 @@ from numpy.typing import NDArray
 
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import ScanLog, mount_line
-from vgm_studio.matching.candidates import select_keyframes
 from vgm_studio.matching.edges import Edge
+from vgm_studio.matching.keyframes import select_keyframes
 from vgm_studio.matching.matcher import ScanMatcher
 
 # Wheel odometry of a working robot is good to a few per cent of the distance and angle

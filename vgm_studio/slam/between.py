@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan
-from vgm_studio.matching.candidates import select_keyframes
+from vgm_studio.matching.keyframes import select_keyframes
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.progress import track
 

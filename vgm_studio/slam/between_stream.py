@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vgm_studio.datasets.scans import Scan
-from vgm_studio.matching.candidates import KeyframePicker
+from vgm_studio.matching.keyframes import KeyframePicker
 from vgm_studio.processes import exit_with_parent, start_worker
 from vgm_studio.slam.between import (
     ANCHOR_ANGLE_DEG,

@@ -27,8 +27,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vgm_studio.datasets.scans import Scan
-from vgm_studio.matching.candidates import KeyframePicker
 from vgm_studio.matching.config import MatchConfig
+from vgm_studio.matching.keyframes import KeyframePicker
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.model.context import Context, LocalMapper, Placements
 from vgm_studio.processes import exit_with_parent, start_worker

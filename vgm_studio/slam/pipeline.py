@@ -16,7 +16,7 @@ from vgm_studio.core import se2
 from vgm_studio.datasets.scans import Scan, ScanLog
 from vgm_studio.errors import InputError
 from vgm_studio.graph.pose_graph import GraphEdge, OptimizeResult, optimize
-from vgm_studio.matching.candidates import KeyframePicker, select_keyframes
+from vgm_studio.matching.keyframes import KeyframePicker, select_keyframes
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.progress import counter
 from vgm_studio.slam.between import BetweenPlacements, place_between
