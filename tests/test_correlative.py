@@ -259,6 +259,30 @@ def test_the_likelihood_grid_equals_a_transform_over_the_whole_grid():
         assert grid.sum() == grid[x0:x1, y0:y1].sum()
 
 
+def test_a_surface_scores_every_pose_of_its_window_as_brute_force_does(office):
+    """``surface`` (the score surface a match's spread is read from) sums in a compiled
+    kernel; each pose must score what brute force's numpy gather gives it."""
+    from vgm_studio.matching import branch_bound
+
+    ref = office.reference_poses()
+    sub = submap_around(office, 20)
+    points = ScanMatcher().points(office.scans[24])
+    guess = se2.between(ref[20], ref[24]) + np.array([0.03, -0.02, 0.01])
+    for window in (
+        SearchWindow(0.5, 0.0),
+        SearchWindow(0.0, np.radians(3)),
+        SearchWindow(0.2, 0.05),
+    ):
+        angles, shifts, scores = branch_bound.surface(sub, points, guess, window)
+        w = branch_bound._discretise(sub, points, guess, window, None)
+        a, x, y = np.meshgrid(
+            np.arange(len(w.angles)), *(2 * [np.arange(-w.reach, w.reach + 1)]), indexing="ij"
+        )
+        expected = branch_bound._scores(w, 0, a.ravel(), x.ravel(), y.ravel())
+        assert np.array_equal(scores.ravel(), expected)
+        assert np.array_equal(angles, w.angles) and len(shifts) == 2 * w.reach + 1
+
+
 def test_scores_gathered_in_chunks_equal_one_gather_of_every_candidate(office):
     from vgm_studio.matching import branch_bound
 

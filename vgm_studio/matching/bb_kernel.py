@@ -30,20 +30,24 @@ def _score(level: Any, base: Any, a: int, shift: int) -> int:
 
 
 @kernel
-def _scores(level: Any, base: Any, a: Any, shift: Any) -> Any:
-    total = np.empty(a.shape[0], np.int32)
-    for k in range(a.shape[0]):
-        total[k] = _score(level, base, a[k], shift[k])
+def _window_scores(level: Any, base: Any, reach: int, stride: int) -> Any:
+    side = 2 * reach + 1
+    total = np.empty((base.shape[0], side, side), np.int32)
+    for a in range(base.shape[0]):
+        for i in range(side):
+            for j in range(side):
+                total[a, i, j] = _score(level, base, a, (i - reach) * stride + (j - reach))
     return total
 
 
-def scores(
-    level: NDArray[np.uint8], base: NDArray[np.intp], a: NDArray[np.intp], shift: NDArray[np.intp]
+def window_scores(
+    level: NDArray[np.uint8], base: NDArray[np.intp], reach: int, stride: int
 ) -> NDArray[np.int32]:
-    """Sum of ``level`` under the scan at each candidate: angle ``a[k]``, its cells moved by
-    the flat ``shift[k]`` (x · stride + y). The sums are integers, so they equal numpy's
-    gather (``branch_bound._scores``, brute force's) to the last bit."""
-    out: NDArray[np.int32] = _scores(level, base, a, shift)
+    """Sum of ``level`` under the scan at every pose of a window, indexed [angle, x, y]: the
+    scan at angle a, its cells (``base[a]``) moved by x and y from -reach to reach. The sums
+    are integers, so they equal numpy's gather (``branch_bound._scores``, brute force's) to
+    the last bit."""
+    out: NDArray[np.int32] = _window_scores(level, base, reach, stride)
     return out
 
 

@@ -106,7 +106,9 @@ def _discretise(
     window: SearchWindow,
     step: float | None,
 ) -> _Window:
-    step = step if step is not None else angular_step(points, submap.resolution)
+    if step is None:
+        # A window of one heading has no step to take.
+        step = angular_step(points, submap.resolution) if window.angular > 0 else 0.0
     n = math.ceil(window.angular / step) if window.angular > 0 else 0
     angles = guess[2] + step * np.arange(-n, n + 1, dtype=np.float64)
     reach = math.floor(window.linear / submap.resolution + 1e-9)
@@ -234,16 +236,11 @@ def surface(
     them: the headings (radians), the shifts (metres, the same along x and y) and the scores
     (sums of grid values, ``PEAK`` a point on an end point), indexed [heading, x, y]."""
     w = _discretise(submap, points, np.asarray(pose, np.float64), window, step)
-    offsets = np.arange(-w.reach, w.reach + 1)
-    a, gx, gy = (
-        g.ravel() for g in np.meshgrid(np.arange(len(w.angles)), offsets, offsets, indexing="ij")
-    )
     # Compiled: a match's spread scores two such surfaces (``response.py``), and the numpy
-    # gather's scratch and passes cost more than the sums over so few poses.
-    shift = (gx * w.stride + gy).astype(np.intp)
-    scores = bb_kernel.scores(w.levels[0], w.base, a.astype(np.intp), shift)
-    scores = scores.reshape(len(w.angles), len(offsets), len(offsets))
-    return w.angles, offsets.astype(np.float64) * submap.resolution, scores
+    # gather's index grids and passes cost more than the sums over so few poses.
+    scores = bb_kernel.window_scores(w.levels[0], w.base, w.reach, w.stride)
+    offsets = np.arange(-w.reach, w.reach + 1, dtype=np.float64)
+    return w.angles, offsets * submap.resolution, scores
 
 
 def thin_points(points: NDArray[np.float64], spacing: float) -> NDArray[np.float64]:
