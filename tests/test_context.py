@@ -111,6 +111,22 @@ def test_neighbours_points_land_where_their_poses_put_them(turn):
     np.testing.assert_array_equal(LocalMapper(scans, log_poses(scans), Context()).points(0, 9), own)
 
 
+def test_a_map_short_of_the_other_scan_holds_its_neighbours_whatever_was_asked_before():
+    """A map that stops short of the pair's other scan is cut from the centre's whole walk
+    when that was made first: the same points in the same order as one placed afresh."""
+    scans = [_scan(i, (i * 0.25, 0.05 * math.sin(i), 0.03 * i)) for i in range(40)]
+    context = Context(neighbours=3, spacing=0.5, matched=False)
+    whole_first = LocalMapper(scans, log_poses(scans), context)
+    whole = whole_first.points(20, 100)
+    for other in (21, 23, 17, 100):
+        short = whole_first.points(20, other)
+        alone = LocalMapper(scans, log_poses(scans), context).points(20, other)
+        np.testing.assert_array_equal(short, alone)
+        count = len(neighbours(log_poses(scans), 20, other, context))
+        assert len(short) == (1 + count) * _BEAMS
+    assert len(whole) == 7 * _BEAMS and len(whole_first.points(20, 21)) < len(whole)
+
+
 @pytest.fixture(scope="module")
 def drifting_log(tmp_path_factory):
     """A simulated log whose odometry drifts from its true poses (``reference``)."""

@@ -197,6 +197,9 @@ class LocalMapper:
         self._walks: dict[int, list[int]] = {}
         # A keyframe's map is asked for again by every loop it takes part in.
         self._maps: dict[tuple[int, tuple[int, ...]], NDArray[np.float64]] = {}
+        # Each centre's map over its whole walk, and each scan's rows in it: a map that stops
+        # short of the pair's other scan (a sequential pair's) is cut from it, not placed again.
+        self._whole: dict[int, tuple[NDArray[np.float64], dict[int, slice]]] = {}
 
     def points(self, centre: int, other: int) -> NDArray[np.float64]:
         """Scan ``centre``'s points and its neighbours' (those that hold), in ``centre``'s
@@ -208,13 +211,31 @@ class LocalMapper:
         key = (centre, near)
         made = self._maps.get(key)
         if made is None:
-            parts = [self.scans[centre].points()]
-            for j in near:
+            whole, rows = self._whole_walk(centre, walked)
+            if len(near) == len(walked):
+                made = whole
+            else:
+                made = np.concatenate([whole[rows[j]] for j in (centre, *near) if j in rows])
+            self._maps[key] = made
+        return made
+
+    def _whole_walk(
+        self, centre: int, walked: list[int]
+    ) -> tuple[NDArray[np.float64], dict[int, slice]]:
+        """The map of ``centre`` and every neighbour on its walk that holds, and the rows of
+        each scan in it."""
+        if centre not in self._whole:
+            parts, rows, start = [self.scans[centre].points()], {}, 0
+            rows[centre] = slice(0, len(parts[0]))
+            for j in walked:
                 pose = self.placed(centre, j)
                 if pose is not None:
+                    start += len(parts[-1])
                     parts.append(se2.transform_points(pose, self.scans[j].points()))
-            made = self._maps[key] = np.concatenate(parts) if len(parts) > 1 else parts[0]
-        return made
+                    rows[j] = slice(start, start + len(parts[-1]))
+            whole = np.concatenate(parts) if len(parts) > 1 else parts[0]
+            self._whole[centre] = (whole, rows)
+        return self._whole[centre]
 
     def sides(
         self, a: int, b: int, estimate: Sequence[float] | NDArray[np.float64]
