@@ -8,7 +8,8 @@ import pytest
 from numpy.typing import NDArray
 
 from vgm_studio.core import se2
-from vgm_studio.matching.refinement import Target, refine
+from vgm_studio.matching.config import MatchConfig
+from vgm_studio.matching.refinement import Target, refine, refine_pose, refine_with
 
 LEVER = 5.0
 
@@ -96,6 +97,21 @@ def test_refinement_finds_what_brute_force_gauss_newton_finds(seed):
     np.testing.assert_allclose(got.covariance, sigma2 * np.linalg.inv(jac.T @ jac), rtol=1e-6)
     # And it did its job: the room lands within millimetres of where it is.
     assert np.abs(got.estimate - truth).max() < 0.01
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_pose_alone_is_the_refinements_own(seed):
+    """``refine_pose`` (a loop match settling on its submap) skips the figures, not a step."""
+    rng = np.random.default_rng(seed)
+    target = Target.build(_room(rng))
+    truth = np.array([0.3, -0.2, 0.1])
+    source = se2.transform_points(se2.inverse(truth), _room(rng))
+    guess = truth + rng.normal(0, [0.05, 0.05, 0.02])
+    config = MatchConfig()
+    whole = refine_with(target, source, guess, config)
+    pose, iterations, converged = refine_pose(target, source, guess, config)
+    assert np.array_equal(pose, whole.estimate)
+    assert (iterations, converged) == (whole.iterations, whole.converged)
 
 
 @pytest.mark.parametrize("count", [3, 7, 40, 2000])

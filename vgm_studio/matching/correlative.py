@@ -27,7 +27,7 @@ from vgm_studio.matching.branch_bound import (
 )
 from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.matcher import MatchResult
-from vgm_studio.matching.refinement import Target, refine_with
+from vgm_studio.matching.refinement import Target, refine_pose, refine_with
 from vgm_studio.matching.response import response_surface, score_at
 from vgm_studio.matching.submap import Submap
 
@@ -169,8 +169,7 @@ class LoopMatcher:
         m = self.config.match
         estimate, iterations, converged = hit.pose, 0, True
         if self.config.refine:
-            r = refine_with(submap.target(), pts, hit.pose, m)
-            estimate, iterations, converged = r.estimate, r.iterations, r.converged
+            estimate, iterations, converged = refine_pose(submap.target(), pts, hit.pose, m)
         fig = refine_with(tgt, pts, estimate, m, iterate=False)
         step = se2.between(guess, hit.pose)
         spread, guess_share = self._surface(submap, pts, estimate, guess)

@@ -20,6 +20,9 @@ from vgm_studio.matching.refine_kernel import figures, gauss_newton, line_normal
 # a 3 × 3 block of cells.
 _CELL = 0.3
 
+# Gauss-Newton stops when its update's norm (metres and radians) falls below this.
+TOLERANCE = 5e-4
+
 
 @dataclass(frozen=True)
 class Target:
@@ -96,7 +99,7 @@ def refine(
     max_iterations: int = 30,
     max_distance: float = 0.3,
     inlier_distance: float = 0.05,
-    tolerance: float = 5e-4,
+    tolerance: float = TOLERANCE,
     degeneracy: float = 0.005,
 ) -> Refinement:
     """Refines ``guess``, the pose of ``source`` points in the target frame.
@@ -116,14 +119,7 @@ def refine(
     """
     source = np.ascontiguousarray(source, dtype=np.float64)
     settings = np.array([max_iterations, max_distance, inlier_distance, tolerance, degeneracy])
-    pose, iterations, converged = gauss_newton(
-        target._cells,
-        target._normals,
-        target._frame,
-        source,
-        np.array(guess, dtype=np.float64),
-        settings,
-    )
+    pose, iterations, converged = _settle(target, source, guess, settings)
     info, paired, count, sum2 = figures(
         target._cells,
         target._normals,
@@ -136,8 +132,8 @@ def refine(
     covariance = _covariance(info, sum2 / (count - 3)) if count > 3 else None
     return Refinement(
         estimate=pose,
-        iterations=int(iterations),
-        converged=bool(converged),
+        iterations=iterations,
+        converged=converged,
         inlier_ratio=count / max(len(source), 1),
         residual=math.sqrt(sum2 / count) if count else float("inf"),
         covariance=covariance,
@@ -158,6 +154,39 @@ def _covariance(info: NDArray[np.float64], sigma2: float) -> NDArray[np.float64]
     if values[-1] <= 0.0 or values[0] <= values[-1] * 1e-15:
         return None  # singular: no covariance, as the matcher has always said
     return np.asarray(sigma2 * (vectors / values) @ vectors.T, dtype=np.float64)
+
+
+def _settle(
+    target: Target, source: NDArray[np.float64], guess: NDArray[np.float64], settings: Any
+) -> tuple[NDArray[np.float64], int, bool]:
+    pose, iterations, converged = gauss_newton(
+        target._cells,
+        target._normals,
+        target._frame,
+        source,
+        np.array(guess, dtype=np.float64),
+        settings,
+    )
+    return pose, int(iterations), bool(converged)
+
+
+def refine_pose(
+    target: Target, source: NDArray[np.float64], guess: NDArray[np.float64], config: MatchConfig
+) -> tuple[NDArray[np.float64], int, bool]:
+    """``refine_with``'s pose alone, (estimate, iterations, converged): none of the figures it
+    computes at the end, for a match that is judged against another target (a loop match
+    settles on its submap and is judged against its keyframe)."""
+    source = np.ascontiguousarray(source, dtype=np.float64)
+    settings = np.array(
+        [
+            config.refine_iterations,
+            config.refine_distance,
+            config.inlier_distance,
+            TOLERANCE,
+            config.degeneracy,
+        ]
+    )
+    return _settle(target, source, guess, settings)
 
 
 def refine_with(

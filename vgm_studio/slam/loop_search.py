@@ -195,12 +195,13 @@ def trail(
     scan alone)."""
     points = [scans[k].points()]
     travelled, j = 0.0, k
+    into_k = se2.inverse(poses[k])  # ``between(poses[k], ·)``, its inverse taken once
     while metres > 0 and j > 0 and len(points) < _TRAIL_SCANS:
         travelled += math.dist(poses[j, :2], poses[j - 1, :2])
         if travelled > metres:
             break
         j -= 1
-        points.append(se2.transform_points(se2.between(poses[k], poses[j]), scans[j].points()))
+        points.append(se2.transform_points(se2.compose(into_k, poses[j]), scans[j].points()))
     return np.concatenate(points)
 
 
