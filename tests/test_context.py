@@ -112,7 +112,7 @@ def test_neighbours_points_land_where_their_poses_put_them(turn):
 
 
 def test_a_map_short_of_the_other_scan_holds_its_neighbours_whatever_was_asked_before():
-    """A map that stops short of the pair's other scan is cut from the centre's whole walk
+    """A map that ends short of the pair's other scan is cut from the centre's whole walk
     when that was made first: the same points in the same order as one placed afresh."""
     scans = [_scan(i, (i * 0.25, 0.05 * math.sin(i), 0.03 * i)) for i in range(40)]
     context = Context(neighbours=3, spacing=0.5, matched=False)

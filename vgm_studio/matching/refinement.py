@@ -20,7 +20,7 @@ from vgm_studio.matching.refine_kernel import figures, gauss_newton, line_normal
 # a 3 × 3 block of cells.
 _CELL = 0.3
 
-# Gauss-Newton stops when its update's norm (metres and radians) falls below this.
+# Gauss-Newton ends when its update's norm (metres and radians) falls below this.
 TOLERANCE = 5e-4
 
 

@@ -197,7 +197,7 @@ class LocalMapper:
         self._walks: dict[int, list[int]] = {}
         # A keyframe's map is asked for again by every loop it takes part in.
         self._maps: dict[tuple[int, tuple[int, ...]], NDArray[np.float64]] = {}
-        # Each centre's map over its whole walk, and each scan's rows in it: a map that stops
+        # Each centre's map over its whole walk, and each scan's rows in it: a map that ends
         # short of the pair's other scan (a sequential pair's) is cut from it, not placed again.
         self._whole: dict[int, tuple[NDArray[np.float64], dict[int, slice]]] = {}
 
