@@ -69,7 +69,6 @@ CORRECTED = (
 WORLDS = ("office", "repetitive", "corridor")
 SEEDS = (1, 2, 3, 4)
 PICTURES = ("infinite-corridor", "mit-csail", "fr-clinic", "intel")
-TAG = ""  # the rows' JSON names end so: "-cautious2" under --cautious 2
 TARGET_INTEL_M, TARGET_INTEL_S, TARGET_CORRECTED_M = 0.025, 60.0, 0.10
 
 
@@ -152,8 +151,9 @@ def cautious_checkpoint(model: Path | None, shift: float) -> Path:
     return out
 
 
-def json_path(name: str, nudge: int | None = None) -> Path:
-    return OUT / (f"{name}{TAG}.json" if nudge is None else f"{name}{TAG}-nudge{nudge}.json")
+def json_path(name: str, nudge: int | None = None, tag: str = "") -> Path:
+    """A row's JSON; ``tag`` ends its name ("-cautious2" under ``--cautious 2``)."""
+    return OUT / (f"{name}{tag}.json" if nudge is None else f"{name}{tag}-nudge{nudge}.json")
 
 
 def failure(stderr: str) -> str:
@@ -169,10 +169,11 @@ def failure(stderr: str) -> str:
     return lines[-1] if lines else "failed"
 
 
-def run(name: str, nudge: int | None = None, model: Path | None = None) -> dict:
+def run(name: str, nudge: int | None = None, model: Path | None = None, tag: str = "") -> dict:
     """One row's run; with ``nudge``, its odometry nudged by rounding-level noise of that
-    seed (``nudged_slam.py``); with ``model``, that checkpoint as the validator."""
-    path = json_path(name, nudge)
+    seed (``nudged_slam.py``); with ``model``, that checkpoint as the validator; ``tag``
+    ends its JSON's name (``json_path``)."""
+    path = json_path(name, nudge, tag)
     if nudge is None:
         command = [sys.executable, "-m", "vgm_studio.tools.cmd"]
     else:
@@ -344,24 +345,22 @@ def main() -> None:
         raise SystemExit(f"unknown rows: {', '.join(unknown)} (see --list)")
     pin_to_cores(2)
     OUT.mkdir(parents=True, exist_ok=True)
-    if args.cautious is not None:
-        global TAG
-        TAG = f"-cautious{args.cautious:g}"
+    tag = "" if args.cautious is None else f"-cautious{args.cautious:g}"
     results, rows, nudged = {}, [], {}
     for name in names:
         if args.from_json:
-            path = json_path(name)
+            path = json_path(name, tag=tag)
             if not path.exists():
                 continue
             d = json.loads(path.read_text())
-            paths = [json_path(name, seed) for seed in seeds]
+            paths = [json_path(name, seed, tag) for seed in seeds]
             nudged[name] = [json.loads(p.read_text()) for p in paths if p.exists()]
         else:
             model = validator_for(name, args.model, args.held_out)
             if args.cautious is not None:
                 model = cautious_checkpoint(model, args.cautious)
-            d = run(name, model=model)
-            nudged[name] = [run(name, seed, model) for seed in seeds]
+            d = run(name, model=model, tag=tag)
+            nudged[name] = [run(name, seed, model, tag) for seed in seeds]
         results[name] = d
         rows.append(row(name, d, nudged[name] if seeds else None))
         print(f"{name}: {' | '.join(rows[-1][1:])}", file=sys.stderr, flush=True)
