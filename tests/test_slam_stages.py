@@ -71,7 +71,8 @@ def test_relations_from_the_simulators_reference_show_the_loops_help(run):
     relations = relations_from_reference(log)
     assert relations is not None and len(relations) > 100
     errors = errors_of(result, relations)
-    assert set(errors) == {"odometry", "before", "after"}
+    assert errors is not None and set(errors) == {"odometry", "before", "after"}
+    assert errors_of(result, None) is None
     assert errors["after"].trans_mean < errors["odometry"].trans_mean
     assert errors["after"].trans_mean < 0.05
 

@@ -142,7 +142,7 @@ def run_audit_command(
     )
     result = run_audit(inp, config)
     voice.say(audit_line(result))
-    errors = errors_of(result.run, source.relations) if source.relations is not None else None
+    errors = errors_of(result.run, source.relations)
     if errors is not None:
         voice.say(table(errors))
     write_run_files(inp.log, result.run, errors, config.maps, outputs.files, voice)

@@ -102,7 +102,7 @@ def run_slam_command(
     say(edge_line(result))
     for line in _what_is_missing(source.log, result):
         voice.warn(line)
-    errors = errors_of(result, source.relations) if source.relations is not None else None
+    errors = errors_of(result, source.relations)
     if errors is not None:
         say(table(errors))
     write_run_files(source.log, result, errors, config.maps, outputs.files, voice)

@@ -113,11 +113,13 @@ class EdgeCounts:
 
 
 def errors_of(
-    result: SlamResult, relations: Sequence[MatchedRelation]
-) -> dict[str, RelationErrors]:
+    result: SlamResult, relations: Sequence[MatchedRelation] | None
+) -> dict[str, RelationErrors] | None:
     """Relation errors of each trajectory, every scan placed by its keyframes: the graphs'
     with the scans between keyframes refined onto them, the odometry's (or an audited
-    graph's input) by the odometry alone."""
+    graph's input) by the odometry alone. None without relations."""
+    if relations is None:
+        return None
     return {
         name: relation_errors(result.scan_poses(poses, name in ("before", "after")), relations)
         for name, poses in keyframe_trajectories(result).items()
