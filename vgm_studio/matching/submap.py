@@ -212,17 +212,6 @@ class Submap:
         return c[:, 0].astype(np.intp), c[:, 1].astype(np.intp)
 
 
-def _likelihood_box(
-    cells: NDArray[np.intp], shape: tuple[int, int], sigma_cells: float
-) -> tuple[tuple[int, int], tuple[int, int]]:
-    """The box of cells within 3σ of a point, ((lo_x, lo_y), (hi_x, hi_y)), hi exclusive:
-    every cell outside it scores zero."""
-    margin = math.ceil(3.0 * sigma_cells) + 1
-    lo = np.maximum(cells.min(axis=0) - margin, 0)
-    hi = np.minimum(cells.max(axis=0) + margin + 1, shape)
-    return (int(lo[0]), int(lo[1])), (int(hi[0]), int(hi[1]))
-
-
 def _likelihood(
     cells: NDArray[np.intp],
     shape: tuple[int, int],
