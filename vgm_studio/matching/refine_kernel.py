@@ -126,7 +126,7 @@ def line_normals(cells: Any, frame: Any, neighbors: int) -> Any:
                             count = _offer_cells((x, y), row, cells, ny, best_i, best_d, count)
             # A point beyond this ring lies outside its square of cells, so at least as far
             # as the square's nearest side: ``ring`` cells and the way to the own cell's edge
-            # (on dense walls the own cell alone then holds the k nearest for most points).
+            # (where a point's k nearest are near it, the own cell alone can hold them).
             left, bottom = frame[0] + (cx - ring) * size, frame[1] + (cy - ring) * size
             reach = min(x - left, y - bottom, left + (2 * ring + 1) * size - x)
             reach = min(reach, bottom + (2 * ring + 1) * size - y)
