@@ -117,9 +117,17 @@ def refine(
         degeneracy: Directions whose curvature is below this share of the largest are left
             where the guess put them (along a featureless corridor, say).
     """
-    source = np.ascontiguousarray(source, dtype=np.float64)
     settings = np.array([max_iterations, max_distance, inlier_distance, tolerance, degeneracy])
+    return _refine(target, source, guess, settings)
+
+
+def _refine(
+    target: Target, source: NDArray[np.float64], guess: NDArray[np.float64], settings: Any
+) -> Refinement:
+    """``refine`` with its settings as the kernels read them (``_settings``)."""
+    source = np.ascontiguousarray(source, dtype=np.float64)
     pose, iterations, converged = _settle(target, source, guess, settings)
+    max_distance, inlier_distance = float(settings[1]), float(settings[2])
     info, paired, count, sum2 = figures(
         target._cells,
         target._normals,
@@ -138,6 +146,15 @@ def refine(
         residual=math.sqrt(sum2 / count) if count else float("inf"),
         covariance=covariance,
         paired_ratio=paired / max(len(source), 1),
+    )
+
+
+def _settings(config: MatchConfig, iterate: bool = True) -> NDArray[np.float64]:
+    """A matcher's settings as the kernels read them: (iterations at most, the gate, the
+    inlier distance, the tolerance, the degeneracy share); no iteration unless ``iterate``."""
+    iterations = config.refine_iterations if iterate else 0
+    return np.array(
+        [iterations, config.refine_distance, config.inlier_distance, TOLERANCE, config.degeneracy]
     )
 
 
@@ -177,16 +194,7 @@ def refine_pose(
     computes at the end, for a match that is judged against another target (a loop match
     settles on its submap and is judged against its keyframe)."""
     source = np.ascontiguousarray(source, dtype=np.float64)
-    settings = np.array(
-        [
-            config.refine_iterations,
-            config.refine_distance,
-            config.inlier_distance,
-            TOLERANCE,
-            config.degeneracy,
-        ]
-    )
-    return _settle(target, source, guess, settings)
+    return _settle(target, source, guess, _settings(config))
 
 
 def refine_with(
@@ -198,12 +206,4 @@ def refine_with(
 ) -> Refinement:
     """``refine`` with a matcher's settings; ``iterate=False`` only judges ``guess`` (its
     inliers, residual and covariance), as the figures of a match are computed."""
-    return refine(
-        target,
-        source,
-        guess,
-        max_iterations=config.refine_iterations if iterate else 0,
-        max_distance=config.refine_distance,
-        inlier_distance=config.inlier_distance,
-        degeneracy=config.degeneracy,
-    )
+    return _refine(target, source, guess, _settings(config, iterate))
