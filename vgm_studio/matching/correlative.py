@@ -78,6 +78,24 @@ class CorrelativeConfig:
     spread_angular_deg: float = 3.0
 
 
+class _Keyframe:
+    """A scan's points in range and, built on first use, its refinement target: a scan that is
+    only ever placed (never a target) needs its points alone."""
+
+    def __init__(self, points: NDArray[np.float64], neighbors: int) -> None:
+        self.points, self._neighbors = points, neighbors
+        self._target: list[Target | None] = []
+
+    @property
+    def target(self) -> Target | None:
+        # Not a cached_property: Python 3.11's holds one lock for every instance, and the
+        # loop threads build their targets at once (two building one is only work twice).
+        if not self._target:
+            points = self.points
+            self._target.append(Target.build(points, self._neighbors) if len(points) >= 3 else None)
+        return self._target[0]
+
+
 class LoopMatcher:
     """Branch-and-bound correlative matcher (Olson 2009 / Hess et al. 2016) over a window, then
     the existing point-to-line refinement (``refinement.py``) for the final centimetres.
@@ -90,31 +108,27 @@ class LoopMatcher:
     def __init__(self, config: CorrelativeConfig | None = None) -> None:
         self.config = config or CorrelativeConfig()
         # Keyed by id(scan); the scan is kept alongside so its id cannot be reused.
-        self._targets: dict[int, tuple[Scan, Target | None]] = {}
-        self._points: dict[int, tuple[Scan, NDArray[np.float64]]] = {}
+        self._cache: dict[int, tuple[Scan, _Keyframe]] = {}
 
     def points(self, scan: Scan) -> NDArray[np.float64]:
         """The scan's points in range, cut once: a keyframe is matched many times."""
-        cached = self._points.get(id(scan))
-        if cached is None:
-            pts = scan.points()
-            cached = (scan, pts[np.hypot(pts[:, 0], pts[:, 1]) <= self.config.max_range])
-            self._points[id(scan)] = cached
-        return cached[1]
+        return self._prepare(scan).points
 
     def _target(self, scan: Scan) -> Target | None:
-        cached = self._targets.get(id(scan))
+        return self._prepare(scan).target
+
+    def _prepare(self, scan: Scan) -> _Keyframe:
+        cached = self._cache.get(id(scan))
         if cached is None:
-            pts = self.points(scan)
-            t = Target.build(pts, self.config.match.normal_neighbors) if len(pts) >= 3 else None
-            cached = (scan, t)
-            self._targets[id(scan)] = cached
+            pts = scan.points()
+            in_range = pts[np.hypot(pts[:, 0], pts[:, 1]) <= self.config.max_range]
+            cached = (scan, _Keyframe(in_range, self.config.match.normal_neighbors))
+            self._cache[id(scan)] = cached
         return cached[1]
 
     def forget(self, scan: Scan) -> None:
         """Drops a target scan's cached structures (for long logs streamed through)."""
-        self._targets.pop(id(scan), None)
-        self._points.pop(id(scan), None)
+        self._cache.pop(id(scan), None)
 
     def search(
         self,
