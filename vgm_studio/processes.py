@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import multiprocessing
 import os
 import signal
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 
@@ -40,6 +42,30 @@ def exit_with_parent() -> None:
         os._exit(0)
 
     threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
+def keep_for_good() -> None:
+    """Leaves every object this process holds now out of the collector's full passes, for
+    good (``gc.freeze``): a worker's inputs (a log's scans), or a process about to end, whose
+    last pass would walk its whole heap to free what the exit frees anyway (a second at the
+    end of Intel's run)."""
+    gc.freeze()
+
+
+@contextlib.contextmanager
+def long_lived() -> Iterator[None]:
+    """Within the block, the objects that exist when it starts are left out of the
+    collector's full passes, and put back after it.
+
+    A run's log and the libraries' modules outlive the run, and every full pass walked them
+    again: on Intel, 8 passes took 1.2 s of the main process's GIL, 0.4 s without them. Not
+    nested: the inner block's end would put back the outer's too.
+    """
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 def start_worker(target: Callable[[Any, Any], None], first: object) -> tuple[Any, Any, Any]:

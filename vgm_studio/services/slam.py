@@ -15,6 +15,7 @@ from vgm_studio.errors import InputError
 from vgm_studio.matching.agreement import check_agreement, disagreement_warning, motions_of
 from vgm_studio.matching.edges import write_edges
 from vgm_studio.model.registry import BUNDLED_MODEL, VALIDATOR_MODELS
+from vgm_studio.processes import long_lived
 from vgm_studio.services import Say, Voice
 from vgm_studio.services.outputs import RunFiles, write_json, write_run_files
 from vgm_studio.slam.config import SlamConfig
@@ -98,7 +99,8 @@ def run_slam_command(
     if score_by_reference(source):
         assert source.relations is not None
         say(f"scored against {len(source.relations)} relations drawn from the reference poses")
-    result = run_slam(source.log, config)
+    with long_lived():  # the log, and the modules loaded so far
+        result = run_slam(source.log, config)
     say(edge_line(result))
     for line in _what_is_missing(source.log, result):
         voice.warn(line)

@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from vgm_studio.datasets.scans import Scan
 from vgm_studio.matching.keyframes import KeyframePicker
-from vgm_studio.processes import exit_with_parent, start_worker
+from vgm_studio.processes import exit_with_parent, keep_for_good, start_worker
 from vgm_studio.slam.between import (
     ANCHOR_ANGLE_DEG,
     ANCHOR_DISTANCE,
@@ -110,6 +110,7 @@ def _work(to: Any, back: Any) -> None:
     # The queue's first message, always: ``BetweenStream`` puts it before any other.
     given: tuple[str, list[Scan], NDArray[np.bool_], tuple[float, float]] = to.get()
     _, scans, usable, keyframe_step = given
+    keep_for_good()  # the scans live as long as this worker
     odometry = np.full((len(scans), 3), np.nan)
     refine = Refiner(scans, odometry)
     # The run picks keyframes among the usable scans and anchors among all (``place_between``).

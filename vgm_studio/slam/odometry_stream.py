@@ -31,7 +31,7 @@ from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.keyframes import KeyframePicker
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.model.context import Context, LocalMapper, Placements
-from vgm_studio.processes import exit_with_parent, start_worker
+from vgm_studio.processes import exit_with_parent, keep_for_good, start_worker
 from vgm_studio.slam.odometry import scan_odometry
 from vgm_studio.slam.placing import placements
 
@@ -150,6 +150,7 @@ def _work(to: Any, back: Any) -> None:
     exit_with_parent()
     given: tuple[Sequence[Scan], NDArray[np.bool_], tuple[float, float]] = to.get()
     scans, usable, keyframe_step = given
+    keep_for_good()  # the scans live as long as this worker
     total = len(scans)
     poses = np.full((total, 3), np.nan)
     placer = _Placer(to, scans, poses)

@@ -21,7 +21,7 @@ from vgm_studio.datasets.scans import Scan
 from vgm_studio.matching.config import MatchConfig
 from vgm_studio.matching.matcher import ScanMatcher
 from vgm_studio.model.context import Context, LocalMapper, Placements, walk
-from vgm_studio.processes import exit_with_parent, spawn
+from vgm_studio.processes import exit_with_parent, keep_for_good, spawn
 
 # Keyframes a job places: small enough that the first arrive soon, large enough that the
 # round trips cost little.
@@ -37,6 +37,7 @@ def _start(inputs: Any) -> None:
     exit_with_parent()
     given: tuple[Sequence[Scan], NDArray[np.float64], Context, MatchConfig] = inputs.get()
     scans, poses, context, config = given
+    keep_for_good()  # the scans live as long as this worker
     _mapper = LocalMapper(scans, poses, context, ScanMatcher(config))
 
 

@@ -14,6 +14,7 @@ import typer
 
 from vgm_studio.datasets import ReadOptions
 from vgm_studio.errors import exit_on_error
+from vgm_studio.processes import keep_for_good
 from vgm_studio.tools import (
     audit_cmd,
     compare_cmd,
@@ -294,8 +295,16 @@ app.command("models")(trainer_cmds.models)
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point: runs the CLI and turns every expected error into one line and an exit code."""
+    """Runs the CLI and turns every expected error into one line and an exit code."""
     exit_on_error(PROG, lambda: _run(argv))
+
+
+def run() -> None:
+    """The ``vgm-studio`` program: ``main`` on the command line, in a process that then ends."""
+    try:
+        main()
+    finally:
+        keep_for_good()
 
 
 def _run(argv: list[str] | None) -> None:
@@ -330,4 +339,4 @@ def _usage_error(exc: Exception) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run()
