@@ -132,3 +132,19 @@ def test_a_point_beyond_the_gate_pairs_with_nothing():
     # Far from every point, nothing pairs at all.
     far = refine(Target.build(target), source + 100.0, np.zeros(3), max_iterations=3)
     assert far.paired_ratio == 0.0 and far.iterations == 1 and not far.converged
+
+
+def test_normals_computed_as_a_refinement_meets_them_are_those_computed_up_front():
+    rng = np.random.default_rng(7)
+    # A submap-sized target, a scan's worth of it moved: the scan meets part of the target.
+    points = np.concatenate([_room(rng) + offset for offset in [(0, 0), (9, 0), (0, 7), (9, 7)]])
+    source = se2.transform_points(se2.inverse(np.array([0.04, -0.03, 0.02])), points[:300])
+    lazy, eager = Target.build(points), Target.build(points)
+    up_front = eager.normals  # every normal computed before any refinement
+    got = refine_with(lazy, source, np.zeros(3), MatchConfig())
+    want = refine_with(eager, source, np.zeros(3), MatchConfig())
+    assert np.array_equal(got.estimate, want.estimate)
+    assert np.array_equal(got.covariance, want.covariance)
+    met = ~np.isnan(lazy._normals[:, 0])
+    assert 0 < met.sum() < len(points) // 2, "the refinement computed normals it never met"
+    assert np.array_equal(lazy.normals, up_front)

@@ -30,7 +30,8 @@ class Target:
     grid of cells its nearest points are found through (``refine_kernel``)."""
 
     points: NDArray[np.float64]
-    # The points and normals sorted by cell, with the grid the kernels read.
+    # The points and normals sorted by cell (a normal NaN until a refinement meets its
+    # point), with the grid the kernels read.
     _cells: tuple[Any, ...] = field(repr=False, compare=False)
     _normals: NDArray[np.float64] = field(repr=False, compare=False)
     _frame: NDArray[np.float64] = field(repr=False, compare=False)
@@ -38,13 +39,17 @@ class Target:
     @property
     def normals(self) -> NDArray[np.float64]:
         """(N, 2) each point's line normal, in the order of ``points``."""
+        line_normals(self._cells, self._frame, self._normals)
         normals = np.empty_like(self._normals)
         normals[self._cells[1]] = self._normals
         return normals
 
     @classmethod
     def build(cls, points: NDArray[np.float64], neighbors: int = 6) -> Target:
-        """Args: points (N, 2); neighbors: nearest points used to fit each local line."""
+        """Args: points (N, 2); neighbors: nearest points used to fit each local line.
+
+        The normals are computed as the refinements meet their points (``refine_kernel``).
+        """
         points = np.ascontiguousarray(points, dtype=np.float64)
         origin = points.min(axis=0)
         cell = np.floor((points - origin) / _CELL).astype(np.int64)
@@ -58,8 +63,8 @@ class Target:
             unique.astype(np.int64),
             np.append(first, len(points)).astype(np.int64),
         )
-        frame = np.array([origin[0], origin[1], _CELL, nx, ny], dtype=np.float64)
-        return cls(points, cells, line_normals(cells, frame, neighbors), frame)
+        frame = np.array([origin[0], origin[1], _CELL, nx, ny, neighbors], dtype=np.float64)
+        return cls(points, cells, np.full((len(points), 2), np.nan), frame)
 
 
 @dataclass(frozen=True)
