@@ -26,7 +26,7 @@ from vgm_studio.matching.branch_bound import (
     thin_points,
 )
 from vgm_studio.matching.config import MatchConfig
-from vgm_studio.matching.matcher import MatchResult
+from vgm_studio.matching.matcher import MatchResult, PreparedScans
 from vgm_studio.matching.refinement import Target, refine_pose, refine_with
 from vgm_studio.matching.response import response_surface, score_at
 from vgm_studio.matching.submap import Submap
@@ -78,24 +78,6 @@ class CorrelativeConfig:
     spread_angular_deg: float = 3.0
 
 
-class _Keyframe:
-    """A scan's points in range and, built on first use, its refinement target: a scan that is
-    only ever placed (never a target) needs its points alone."""
-
-    def __init__(self, points: NDArray[np.float64], neighbors: int) -> None:
-        self.points, self._neighbors = points, neighbors
-        self._target: list[Target | None] = []
-
-    @property
-    def target(self) -> Target | None:
-        # Not a cached_property: Python 3.11's holds one lock for every instance, and the
-        # loop threads build their targets at once (two building one is only work twice).
-        if not self._target:
-            points = self.points
-            self._target.append(Target.build(points, self._neighbors) if len(points) >= 3 else None)
-        return self._target[0]
-
-
 class LoopMatcher:
     """Branch-and-bound correlative matcher (Olson 2009 / Hess et al. 2016) over a window, then
     the existing point-to-line refinement (``refinement.py``) for the final centimetres.
@@ -107,28 +89,18 @@ class LoopMatcher:
 
     def __init__(self, config: CorrelativeConfig | None = None) -> None:
         self.config = config or CorrelativeConfig()
-        # Keyed by id(scan); the scan is kept alongside so its id cannot be reused.
-        self._cache: dict[int, tuple[Scan, _Keyframe]] = {}
+        self._prepared = PreparedScans(self.config.max_range, self.config.match.normal_neighbors)
 
     def points(self, scan: Scan) -> NDArray[np.float64]:
         """The scan's points in range, cut once: a keyframe is matched many times."""
-        return self._prepare(scan).points
+        return self._prepared[scan].points
 
     def _target(self, scan: Scan) -> Target | None:
-        return self._prepare(scan).target
-
-    def _prepare(self, scan: Scan) -> _Keyframe:
-        cached = self._cache.get(id(scan))
-        if cached is None:
-            pts = scan.points()
-            in_range = pts[np.hypot(pts[:, 0], pts[:, 1]) <= self.config.max_range]
-            cached = (scan, _Keyframe(in_range, self.config.match.normal_neighbors))
-            self._cache[id(scan)] = cached
-        return cached[1]
+        return self._prepared[scan].target
 
     def forget(self, scan: Scan) -> None:
         """Drops a target scan's cached structures (for long logs streamed through)."""
-        self._cache.pop(id(scan), None)
+        self._prepared.forget(scan)
 
     def search(
         self,

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -75,21 +74,68 @@ class MatchResult:
         return d
 
 
-class _Prepared:
-    """A scan's points in range, and what a match against it needs, built on first use: a
-    scan only ever matched onto another (a local map's neighbour) needs its points alone."""
+class PreparedScan:
+    """A scan's points in range and, built on first use, what a match against it needs: its
+    refinement target, and kiss-icp's voxel map where it was prepared with a registration. A
+    scan only ever matched onto another (a local map's neighbour, a loop's scan) needs its
+    points alone.
 
-    def __init__(self, points: NDArray[np.float64], kiss: KissRegistration, neighbors: int):
+    Not ``cached_property``: Python 3.11's takes one lock for every instance, and the loop
+    threads build their targets at once (two building one is only work twice; the first
+    built is kept).
+    """
+
+    def __init__(
+        self, points: NDArray[np.float64], neighbors: int, kiss: KissRegistration | None = None
+    ) -> None:
         self.points = points
-        self._kiss, self._neighbors = kiss, neighbors
+        self._neighbors, self._kiss = neighbors, kiss
+        # Empty until built, then the one value built first.
+        self._voxel_map: list[VoxelHashMap | None] = []
+        self._target: list[Target | None] = []
 
-    @cached_property
+    @property
     def voxel_map(self) -> VoxelHashMap | None:
-        return self._kiss.target_map(self.points) if len(self.points) >= 3 else None
+        if not self._voxel_map:
+            assert self._kiss is not None, "prepared without kiss-icp: no voxel map"
+            enough = len(self.points) >= 3
+            self._voxel_map.append(self._kiss.target_map(self.points) if enough else None)
+        return self._voxel_map[0]
 
-    @cached_property
+    @property
     def target(self) -> Target | None:
-        return Target.build(self.points, self._neighbors) if len(self.points) >= 3 else None
+        if not self._target:
+            enough = len(self.points) >= 3
+            self._target.append(Target.build(self.points, self._neighbors) if enough else None)
+        return self._target[0]
+
+
+class PreparedScans:
+    """Each scan's ``PreparedScan``, made once and kept until ``forget``.
+
+    Args:
+        max_range: Points farther than this are left out, metres.
+        neighbors: Nearest points each target point's local line is fitted to.
+        kiss: The registration that builds voxel maps; None where none is needed.
+    """
+
+    def __init__(self, max_range: float, neighbors: int, kiss: KissRegistration | None = None):
+        self._max_range, self._neighbors, self._kiss = max_range, neighbors, kiss
+        # Keyed by id(scan); the scan is kept alongside so its id cannot be reused.
+        self._cache: dict[int, tuple[Scan, PreparedScan]] = {}
+
+    def __getitem__(self, scan: Scan) -> PreparedScan:
+        cached = self._cache.get(id(scan))
+        if cached is None:
+            pts = scan.points()
+            pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= self._max_range]
+            cached = (scan, PreparedScan(pts, self._neighbors, self._kiss))
+            self._cache[id(scan)] = cached
+        return cached[1]
+
+    def forget(self, scan: Scan) -> None:
+        """Drops a scan's prepared structures (for long logs streamed through)."""
+        self._cache.pop(id(scan), None)
 
 
 class ScanMatcher:
@@ -98,25 +144,16 @@ class ScanMatcher:
     def __init__(self, config: MatchConfig | None = None) -> None:
         self.config = config or MatchConfig()
         self._kiss = KissRegistration(self.config)
-        # Keyed by id(scan); the scan is kept alongside so its id cannot be reused.
-        self._cache: dict[int, tuple[Scan, _Prepared]] = {}
+        self._prepared = PreparedScans(
+            self.config.max_range, self.config.normal_neighbors, self._kiss
+        )
 
     def points(self, scan: Scan) -> NDArray[np.float64]:
-        return self._prepare(scan).points
-
-    def _prepare(self, scan: Scan) -> _Prepared:
-        cached = self._cache.get(id(scan))
-        if cached is not None:
-            return cached[1]
-        pts = scan.points()
-        pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= self.config.max_range]
-        hit = _Prepared(pts, self._kiss, self.config.normal_neighbors)
-        self._cache[id(scan)] = (scan, hit)
-        return hit
+        return self._prepared[scan].points
 
     def forget(self, scan: Scan) -> None:
         """Drops a scan's cached structures (for long logs streamed through)."""
-        self._cache.pop(id(scan), None)
+        self._prepared.forget(scan)
 
     def judge(self, a: Scan, b: Scan, pose: NDArray[np.float64]) -> Refinement | None:
         """How scan b at ``pose`` (not moved) agrees with scan a; None where either has too
@@ -128,7 +165,7 @@ class ScanMatcher:
     ) -> Refinement | None:
         """Scan b refined onto scan a from ``guess``, point to line without kiss-icp first (a
         guess already within centimetres); None where either has too few points."""
-        pa, pb = self._prepare(a), self._prepare(b)
+        pa, pb = self._prepared[a], self._prepared[b]
         if pa.target is None or len(pb.points) < 3:
             return None
         pose = np.asarray(guess, dtype=np.float64)
@@ -136,7 +173,7 @@ class ScanMatcher:
 
     def match(self, a: Scan, b: Scan, guess: NDArray[np.float64]) -> MatchResult:
         """Estimates the pose of scan b in the frame of scan a, starting from ``guess``."""
-        pa, pb = self._prepare(a), self._prepare(b)
+        pa, pb = self._prepared[a], self._prepared[b]
         guess = np.asarray(guess, dtype=np.float64)
         if pa.voxel_map is None or pa.target is None or len(pb.points) < 3:
             return MatchResult(guess, 0, False, 0.0, float("inf"), None, guess)
