@@ -45,14 +45,12 @@ def offset(rng, metres, degrees):
 
 def test_levels_hold_the_max_of_the_block_starting_at_each_cell():
     rng = np.random.default_rng(0)
-    sub = Submap.from_points(rng.uniform(0, 3, size=(60, 2)), 0.05, depth=4)
-    base = sub.levels[0]
-    assert base.max() == PEAK
     # Every cell of every level, the blocks running past the far edges read as zeros: the
     # levels are computed only where a block reaches the points' cells.
     for points, depth in ((rng.uniform(0, 3, size=(60, 2)), 4), (rng.normal(size=(9, 2)), 6)):
         sub = Submap.from_points(points, 0.05, depth=depth)
         base = sub.levels[0]
+        assert base.max() == PEAK
         nx, ny = base.shape
         for h in range(1, depth + 1):
             size = 2**h
@@ -60,10 +58,11 @@ def test_levels_hold_the_max_of_the_block_starting_at_each_cell():
             wide[:nx, :ny] = base
             blocks = np.lib.stride_tricks.sliding_window_view(wide, (size, size))
             assert np.array_equal(sub.levels[h], blocks[:nx, :ny].max(axis=(2, 3)))
-    # The padding is wider than the largest block, so the outermost cells are empty on all levels.
-    for level in sub.levels:
-        assert level[0].max() == 0 and level[-1].max() == 0
-        assert level[:, 0].max() == 0 and level[:, -1].max() == 0
+        # The padding is wider than the largest block: the outermost cells are empty on all
+        # levels.
+        for level in sub.levels:
+            assert level[0].max() == 0 and level[-1].max() == 0
+            assert level[:, 0].max() == 0 and level[:, -1].max() == 0
 
 
 def test_submap_from_scans_checks_its_poses(office):
