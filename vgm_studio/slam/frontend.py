@@ -53,10 +53,12 @@ from vgm_studio.slam.loop_search import (
     window_candidates,
 )
 from vgm_studio.slam.sequential import SequentialMatcher
-from vgm_studio.slam.turned import is_turned, trail_overlap
+from vgm_studio.slam.turned import judge_turned
 from vgm_studio.slam.uncertainty import UncertaintyGraph
 
 _T = TypeVar("_T")
+# Submaps the front end holds at once (``FrontEnd._match_loops``): a few hundred MB at most.
+_SUBMAPS_AT_ONCE = 64
 
 
 class FrontEnd:
@@ -246,13 +248,10 @@ class FrontEnd:
 
     def _close(self, candidates: list[Candidate], poses: NDArray[np.float64]) -> None:
         """Matches, validates and checks ``candidates``, and adds the loops kept."""
-        # Submaps first (shared by candidates), then the matches, both on every thread: the
-        # searches are numpy gathers that release the GIL, and each match is independent.
-        unique = {self._submap_key(c.a, c.b): c for c in candidates}
-        self._map(lambda c: self._submap(c.a, c.b), list(unique.values()))
-        edges = self._map(self._match_loop, candidates)
+        edges = self._match_loops(candidates)
         self._validate_measured(edges)
-        self._judge_turned(edges, poses)
+        if self.loop_bar is not None:
+            judge_turned(edges, self._submap, self.scans, poses, self.config, self.loop_matcher)
         self._check_consistency([e for e in edges if e.kept], poses)
         kept = [e for e in edges if e.kept]
         for e in kept:
@@ -261,33 +260,27 @@ class FrontEnd:
         if kept:
             self.estimate.update(extra_iterations=2)
 
-    def _judge_turned(self, edges: list[SlamEdge], poses: NDArray[np.float64]) -> None:
-        """Turned window loops the network rejected, kept where the local maps overlap
-        (``FrontEndConfig.turned_overlap``, ``slam.turned``); the consistency check then asks
-        them for support like place loops.
+    def _match_loops(self, candidates: list[Candidate]) -> list[SlamEdge]:
+        """Each candidate matched on its submap, ``_SUBMAPS_AT_ONCE`` submaps held at a time.
 
-        Window loops only, and only where the estimate knows roughly where b is
-        (``FrontEndConfig.turned_max_reach``): the overlap is read with b's trail placed by
-        the estimate, and where that may have slid far along a corridor, a periodic
-        corridor overlaps itself one period along. A place loop
-        comes from looks alone, and a corridor seen from both ends looks like any other
-        stretch of it: on the infinite corridor 33 of the 48 turned place loops that
-        overlapped were 2 m or more off (median 15 m), against 1 of 279 window loops.
+        A submap's grids at every branch-and-bound level take megabytes: the final sweep's
+        candidates, spread over the whole building, held 6 GB of them on freiburg-campus.
+        Submaps first (shared by candidates), then the matches, both on every thread: the
+        searches are numpy gathers that release the GIL, and each match is independent.
         """
-        cfg = self.config
-        if cfg.turned_overlap is None or self.loop_bar is None:
-            return
-        match = self.loop_matcher.config.match
-        for e in edges:
-            # Injected false loops stand for wrong window loops: they face the rule too.
-            searched = e.source in WINDOW_SOURCES or e.injected
-            if e.kept or not searched or e.match.covariance is None:
-                continue
-            if not is_turned(e, cfg.loop_max_angle_deg) or e.reach > cfg.turned_max_reach:
-                continue
-            submap = self._submap(e.a, e.b)
-            e.overlap = trail_overlap(e, submap, self.scans, poses, cfg.submap_keyframes, match)
-            e.kept = e.validated = e.overlap >= cfg.turned_overlap
+        groups: dict[tuple[int, int, int], list[int]] = {}
+        for i, c in enumerate(candidates):
+            groups.setdefault(self._submap_key(c.a, c.b), []).append(i)
+        keys = list(groups)
+        edges: dict[int, SlamEdge] = {}
+        for start in range(0, len(keys), _SUBMAPS_AT_ONCE):
+            chunk = [groups[k] for k in keys[start : start + _SUBMAPS_AT_ONCE]]
+            self._submaps.clear()
+            self._map(lambda c: self._submap(c.a, c.b), [candidates[g[0]] for g in chunk])
+            order = [i for g in chunk for i in g]
+            matched = self._map(self._match_loop, [candidates[i] for i in order])
+            edges.update(zip(order, matched, strict=True))
+        return [edges[i] for i in range(len(candidates))]
 
     def _scan(self, k: int) -> NDArray[np.float64]:
         return self.scans[k].points()
@@ -355,6 +348,8 @@ class FrontEnd:
     def _submap(self, a: int, b: int) -> Submap:
         key = self._submap_key(a, b)
         if key not in self._submaps:
+            if len(self._submaps) >= _SUBMAPS_AT_ONCE:  # never within a chunk of _match_loops
+                del self._submaps[next(iter(self._submaps))]
             members = range(key[1], key[2])
             poses = se2.between(self.estimate.poses[a], self.estimate.poses[members])
             self._submaps[key] = Submap.from_scans([self.scans[k] for k in members], poses)
