@@ -118,7 +118,7 @@ def unclosed_candidates(
     span = config.submap_keyframes
     ends = np.asarray(closed, dtype=np.int64).reshape(-1, 2)
     keyframes = np.arange(len(poses))
-    lonely = ~(np.abs(keyframes[:, None] - ends[None, :, 1]) <= span).any(axis=1)
+    lonely = _farther_than(keyframes, ends[:, 1], span)
     # A block at a time, as online: the projection holds a K-long array per keyframe asked.
     unclosed = keyframes[lonely].tolist()
     found = [
@@ -141,6 +141,20 @@ def unclosed_candidates(
         if moved(c)
         and not ((np.abs(ends[:, 0] - c.a) <= span) & (np.abs(ends[:, 1] - c.b) <= span)).any()
     ]
+
+
+def _farther_than(
+    keyframes: NDArray[np.int64], ends: NDArray[np.int64], span: int
+) -> NDArray[np.bool_]:
+    """Which ``keyframes`` lie more than ``span`` from every one of ``ends``: by the nearest
+    end on either side, not a keyframes × ends table (a long log's is gigabytes)."""
+    if len(ends) == 0:
+        return np.ones(len(keyframes), dtype=bool)
+    ends = np.sort(ends)
+    right = np.searchsorted(ends, keyframes).clip(max=len(ends) - 1)
+    left = (right - 1).clip(min=0)
+    nearest = np.minimum(np.abs(ends[left] - keyframes), np.abs(ends[right] - keyframes))
+    return nearest > span
 
 
 def _window_of(
