@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -39,14 +40,19 @@ class KissOdometry(KissICP):  # type: ignore[misc]  # kiss-icp ships no types
     is made when the sensor is ``sweep`` metres from where the last one was made: the map
     keeps points up to ``max_range + sweep`` instead of ``max_range``, which at 30 m changes
     nothing a 0.9 m correspondence gate can see.
+
+    ``max_slide``: where the prediction is the wheels' step, ICP may turn it as it likes but
+    not move it further than this, metres (``slam.odometry.scan_odometry`` says why); beyond
+    it the prediction's position stands, turned as ICP turned it (0: always).
     """
 
     last_pose: NDArray[np.float64]
     last_delta: NDArray[np.float64]
 
-    def __init__(self, config: KISSConfig, sweep: float = 0.5) -> None:
+    def __init__(self, config: KISSConfig, sweep: float = 0.5, max_slide: float = math.inf) -> None:
         super().__init__(config)
         self.sweep = sweep
+        self.max_slide = max_slide
         self._swept: NDArray[np.float64] | None = None
 
     def register_frame(
@@ -64,7 +70,11 @@ class KissOdometry(KissICP):  # type: ignore[misc]  # kiss-icp ships no types
             max_correspondance_distance=3 * sigma,
             kernel=sigma,
         )
-        self.adaptive_threshold.update_model_deviation(np.linalg.inv(initial_guess) @ new_pose)
+        correction = np.linalg.inv(initial_guess) @ new_pose
+        if np.hypot(correction[0, 3], correction[1, 3]) > self.max_slide:
+            correction[:3, 3] = 0.0  # the turn about the sensor kept, the slide dropped
+            new_pose = initial_guess @ correction
+        self.adaptive_threshold.update_model_deviation(correction)
         rotation, origin = new_pose[:3, :3], new_pose[:3, 3]
         self.local_map.add_points(frame_downsample @ rotation.T + origin)
         if self._swept is None or np.linalg.norm(origin - self._swept) >= self.sweep:

@@ -20,6 +20,7 @@ from vgm_studio.services import Say, Voice
 from vgm_studio.services.outputs import RunFiles, write_json, write_run_files
 from vgm_studio.slam.config import SlamConfig
 from vgm_studio.slam.loop_edges import loop_edges
+from vgm_studio.slam.odometry import has_wheels
 from vgm_studio.slam.pipeline import SlamResult, run_slam
 from vgm_studio.slam.report import (
     edge_line,
@@ -170,6 +171,11 @@ def _what_is_missing(log: ScanLog, result: SlamResult) -> list[str]:
             f"{log.path}: odometry on {with_odometry} of {len(log.scans)} scans only; "
             "kiss-icp and the scans alone give the motion"
         )
+    elif not has_wheels(log.scans):
+        lines.append(
+            f"{log.path}: the odometry never moves in this log; kiss-icp and the scans alone "
+            "give the motion"
+        )
     if len(result.keyframes) < 2:
         lines.append(
             f"{log.path}: one keyframe (the robot never moved a keyframe's distance or angle): "
@@ -177,7 +183,7 @@ def _what_is_missing(log: ScanLog, result: SlamResult) -> list[str]:
         )
     else:
         lines += _no_loop_closed(log, result)
-    if not log.has_odometry:
+    if not has_wheels(log.scans):
         return lines
     seq = [e for e in result.edges if e.kind == "sequential"]
     keys = result.keyframes

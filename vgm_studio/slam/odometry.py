@@ -112,6 +112,7 @@ def scan_odometry(
     recovery: Recovery | None = None,
     judge: Judge | None = None,
     on_pose: Callable[[int, NDArray[np.float64]], None] | None = None,
+    max_slide: float = 0.0,
 ) -> NDArray[np.float64]:
     """kiss-icp odometry over scans in order, predicted by the scans' own odometry if any.
 
@@ -122,14 +123,25 @@ def scan_odometry(
         recovery: How a wheel-less step is searched again.
         judge: Chooses among a wheel-less step's candidates; None: the best score.
         on_pose: Told each scan's pose as soon as it is final (index, pose).
+        max_slide: With wheels, how far ICP may move the wheels' step, metres
+            (``KissOdometry``); it turns the step as it likes. 0: the wheels measure how far
+            the robot went, the scans how far it turned. Over one step wheels err by
+            centimetres in distance and by degrees in heading; ICP on a map that pins one
+            direction only (a corridor, a campus's long walls) slides by decimetres to
+            metres. Where it moved the wheels' step by more than 0.2 m the wheels were
+            nearer the corrected logs' reference 295 times, ICP 13 times (more than 0.3 m:
+            101 to 0; on freiburg-campus 2.3 m, twice); by more than 0.1 m, 883 to 258.
+            Against no limit, with 0 every corrected log with wheels maps as well or better
+            (freiburg-campus 0.073 → 0.054 m; 0.064 with 0.2), and Intel 0.0191 → 0.018 m,
+            its heading 0.33 → 0.38°.
 
     Returns:
         (N, 3) sensor poses (x, y, θ) relative to the first scan.
     """
     config = config or MatchConfig()
     recovery = recovery or Recovery()
-    pipeline = KissOdometry(kiss_config(config))
-    wheels = all(s.odometry is not None for s in scans)
+    wheels = has_wheels(scans)
+    pipeline = KissOdometry(kiss_config(config), max_slide=max_slide if wheels else math.inf)
     poses = np.zeros((len(scans), 3))
     previous: Scan | None = None
     bar = track(scans, "odometry", "scan", enabled=progress)
@@ -151,6 +163,16 @@ def scan_odometry(
         if on_pose is not None:
             on_pose(i, poses[i])
     return poses
+
+
+def has_wheels(scans: Sequence[Scan]) -> bool:
+    """Whether the scans' odometry can predict their steps: every scan has a pose, and not
+    all the same one (a log from a robot without encoders may fill its odometry fields with
+    zeros, and a prediction that never moves would hold every step still)."""
+    if not scans or any(s.odometry is None for s in scans):
+        return False
+    first = scans[0].odometry
+    return any(not np.array_equal(s.odometry, first) for s in scans[1:])
 
 
 def _recover(

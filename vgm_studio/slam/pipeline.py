@@ -25,7 +25,7 @@ from vgm_studio.slam.config import FrontEndConfig, SlamConfig
 from vgm_studio.slam.edges import SlamEdge
 from vgm_studio.slam.factors import fallback_edge, kept_edge
 from vgm_studio.slam.frontend import FrontEnd
-from vgm_studio.slam.odometry import scan_odometry
+from vgm_studio.slam.odometry import has_wheels, scan_odometry
 from vgm_studio.slam.odometry_stream import Chunk, OdometryStream, ready
 from vgm_studio.slam.validation import EdgeValidator, LocalMaps, check_loop_precision, pair_judge
 
@@ -203,7 +203,7 @@ def _streams(log: ScanLog, config: SlamConfig, fe: FrontEndConfig) -> bool:
     it."""
     if not _workers_pay(log, fe) or fe.false_loops or config.validation.validator == "reference":
         return False
-    return all(s.odometry is not None for s in log.scans)
+    return has_wheels(log.scans)
 
 
 def _front_end(
