@@ -189,6 +189,8 @@ def run(name: str, nudge: int | None = None, model: Path | None = None, tag: str
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu_s = after.ru_utime + after.ru_stime - cpu.ru_utime - cpu.ru_stime
     if proc.returncode:
+        # The whole of what it printed, traceback included, for a failure seen once.
+        path.with_suffix(".stderr").write_text(proc.stderr)
         return {"error": failure(proc.stderr)}
     doc = json.loads(path.read_text())
     doc["wall"] = wall

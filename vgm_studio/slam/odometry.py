@@ -129,8 +129,9 @@ def scan_odometry(
             centimetres in distance and by degrees in heading; ICP on a map that pins one
             direction only (a corridor, a campus's long walls) slides by decimetres to
             metres. Where it moved the wheels' step by more than 0.2 m the wheels were
-            nearer the corrected logs' reference 295 times, ICP 13 times (more than 0.3 m:
-            101 to 0; on freiburg-campus 2.3 m, twice); by more than 0.1 m, 883 to 258.
+            nearer the corrected logs' reference 279 times, ICP 13 times (more than 0.3 m:
+            102 to 0; on freiburg-campus 2.3 m, twice); by more than 0.1 m, 883 to 258
+            (``benchmarks/wheel_slides.py``).
             Against no limit, with 0 every corrected log with wheels maps as well or better
             (freiburg-campus 0.073 → 0.054 m; 0.064 with 0.2), and Intel 0.0191 → 0.018 m,
             its heading 0.33 → 0.38°.
