@@ -154,7 +154,7 @@ def _farther_than(
     right = np.searchsorted(ends, keyframes).clip(max=len(ends) - 1)
     left = (right - 1).clip(min=0)
     nearest = np.minimum(np.abs(ends[left] - keyframes), np.abs(ends[right] - keyframes))
-    return nearest > span
+    return np.asarray(nearest > span, dtype=bool)
 
 
 def _window_of(

@@ -172,8 +172,8 @@ def has_wheels(scans: Sequence[Scan]) -> bool:
     zeros, and a prediction that never moves would hold every step still)."""
     if not scans or any(s.odometry is None for s in scans):
         return False
-    first = scans[0].odometry
-    return any(not np.array_equal(s.odometry, first) for s in scans[1:])
+    first = np.asarray(scans[0].odometry)
+    return any(not np.array_equal(np.asarray(s.odometry), first) for s in scans[1:])
 
 
 def _recover(
