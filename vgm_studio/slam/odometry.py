@@ -5,7 +5,9 @@ kiss-icp predicts each frame with a constant-velocity model (``last_pose @ last_
 along the corridor, and at the start of a log (zero velocity) it lags behind: on simulated
 corridor loops that alone leaves half the steps centimetres to decimetres off. Wheel
 odometry is a far better prediction over one scan, so where the log has it, it replaces the
-constant-velocity delta before each frame; ICP then corrects what the wheels got wrong.
+constant-velocity delta before each frame. ICP then corrects the heading, which wheels get
+wrong by degrees; their translation, right to centimetres over a step, stands where ICP would
+slide it along walls that pin one direction only (``scan_odometry``'s ``max_slide``).
 
 Without wheels, a log whose scans are far apart (a corrected log thinned to one scan a metre,
 Örebro: steps of 1–3 m and up to 76°) defeats the constant-velocity prediction: ICP only pairs
