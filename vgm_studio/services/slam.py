@@ -161,6 +161,7 @@ def _no_loop_closed(log: ScanLog, result: SlamResult) -> list[str]:
 def _what_is_missing(log: ScanLog, result: SlamResult) -> list[str]:
     """Why a short or still log's outputs are thin, and whether the scans and odometry agree."""
     lines = []
+    wheels = has_wheels(log.scans)
     with_odometry = sum(s.odometry is not None for s in log.scans)
     if with_odometry == 0:
         lines.append(f"{log.path}: no odometry in this log; kiss-icp alone gives the motion")
@@ -171,7 +172,7 @@ def _what_is_missing(log: ScanLog, result: SlamResult) -> list[str]:
             f"{log.path}: odometry on {with_odometry} of {len(log.scans)} scans only; "
             "kiss-icp and the scans alone give the motion"
         )
-    elif not has_wheels(log.scans):
+    elif not wheels:
         lines.append(
             f"{log.path}: the odometry never moves in this log; kiss-icp and the scans alone "
             "give the motion"
@@ -183,7 +184,7 @@ def _what_is_missing(log: ScanLog, result: SlamResult) -> list[str]:
         )
     else:
         lines += _no_loop_closed(log, result)
-    if not has_wheels(log.scans):
+    if not wheels:
         return lines
     seq = [e for e in result.edges if e.kind == "sequential"]
     keys = result.keyframes

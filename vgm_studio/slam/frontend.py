@@ -210,8 +210,6 @@ class FrontEnd:
             e.kept = e.validated = e.kept and e.match.covariance is not None
 
     def _loops(self, block: range) -> None:
-        # Submaps are placed by the estimate, which moves when loops close: built per block.
-        self._submaps.clear()
         poses = self.estimate.poses.copy()
         self._searched.update(dict.fromkeys(block, poses))
         candidates = window_candidates(block, poses, self._uncertainty, self.config)
@@ -238,7 +236,6 @@ class FrontEnd:
     def _sweep(self) -> None:
         """The revisits the run never closed, searched once more from the final estimate
         (``loop_search.unclosed_candidates``)."""
-        self._submaps.clear()
         closed = np.array(
             [(e.a, e.b) for e in self.edges if e.kind == "loop" and e.kept], dtype=np.int64
         )
@@ -275,6 +272,8 @@ class FrontEnd:
         edges: dict[int, SlamEdge] = {}
         for start in range(0, len(keys), _SUBMAPS_AT_ONCE):
             chunk = [groups[k] for k in keys[start : start + _SUBMAPS_AT_ONCE]]
+            # Submaps are placed by the estimate, which moves when loops close: none is kept
+            # from an earlier call, and none evicted while the threads build this chunk's.
             self._submaps.clear()
             self._map(lambda c: self._submap(c.a, c.b), [candidates[g[0]] for g in chunk])
             order = [i for g in chunk for i in g]
